@@ -1,1 +1,33 @@
-//! blendtrack core: path tracking with a dynamic control point (placeholder, filled in next commit).
+//! blendtrack core: path tracking with a dynamic control point.
+//!
+//! This crate implements the method of "Path Tracking with Dynamic Control
+//! Point Blending for Autonomous Vehicles" (Lombard et al.) as fixed by the
+//! project's SPEC: a front-axle Stanley command and a rear-axle
+//! curvature-based geometric command blended with a barycentric weight
+//! `alpha` in [0, 1] ([`lateral`]), a curvature-aware longitudinal law built
+//! on virtual borders and a ray cast ([`longitudinal`]), the reference
+//! [`path`] they track, a kinematic bicycle [`vehicle`] with actuator limits,
+//! delay and sensor noise, and a closed-loop [`sim`]ulator. It knows nothing
+//! of Python or SUMO: the binding crate and the Python package build on it.
+//!
+//! Conventions (SPEC §1): SI units, world frame x east / y north, heading CCW
+//! from +x in (-pi, pi], steering > 0 turns left, lateral error > 0 on the
+//! left of the path, `v < 0` drives backwards.
+
+pub mod config;
+pub mod controller;
+pub mod error;
+pub mod lateral;
+pub mod longitudinal;
+pub mod path;
+pub mod sim;
+pub mod vehicle;
+
+pub use config::{Config, ControllerConfig, Experiment, ExperimentSet, LateralKind};
+pub use controller::{ControlOutput, Controller, Track};
+pub use error::{ConfigError, Error, PathError, StateError};
+pub use lateral::AlphaSchedule;
+pub use longitudinal::{Corridor, Obstacle};
+pub use path::{wrap_angle, Path, Projection, Widths};
+pub use sim::{simulate, SimOptions, Trace};
+pub use vehicle::{Command, Direction, NoiseModel, Sensor, Vehicle, VehicleParams, VehicleState};

@@ -1,0 +1,171 @@
+//! One full controller step: hinted projections, blended lateral command,
+//! ray cast and longitudinal law (the unit the benchmark measures).
+//!
+//! A [`Track`] is a path with its virtual borders. A [`Controller`] holds one
+//! vehicle's persistent state between steps (the projection hints of the rear
+//! axle, front axle and control point) and turns a measured state into a
+//! [`ControlOutput`]: the steering and acceleration commands plus the errors
+//! of the control point `P(alpha)` that studies report.
+
+use crate::config::{validate_vehicle, ControllerConfig, LateralKind};
+use crate::error::{ConfigError, StateError};
+use crate::lateral::{blend, pure_pursuit_command, rear_command, stanley_command, travel_heading, LateralGains};
+use crate::longitudinal::{longitudinal_accel, Corridor, Obstacle};
+use crate::path::{wrap_angle, Path};
+use crate::vehicle::{VehicleParams, VehicleState};
+use nalgebra::Point2;
+use std::sync::Arc;
+
+/// A path and its virtual borders.
+#[derive(Debug, Clone)]
+pub struct Track {
+    pub path: Path,
+    pub corridor: Corridor,
+}
+
+impl Track {
+    /// Builds the borders from the path's widths or `cfg.path_width_m`.
+    pub fn new(path: Path, cfg: &ControllerConfig) -> Self {
+        let corridor = Corridor::new(&path, cfg);
+        Track { path, corridor }
+    }
+}
+
+/// What one controller step decided and measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ControlOutput {
+    /// Steering command (rad), clamped to the vehicle's limit.
+    pub steering_rad: f64,
+    /// Acceleration command along the direction of travel (m/s^2), before vehicle limits.
+    pub accel_mps2: f64,
+    /// Blend factor used.
+    pub alpha: f64,
+    /// Front (Stanley) and rear (curvature-based) commands before blending (rad).
+    pub steering_front_rad: f64,
+    pub steering_rear_rad: f64,
+    /// Arc length of the rear axle's foot point.
+    pub s_rear_m: f64,
+    /// Arc length, signed lateral error and heading error of the control point P(alpha).
+    pub s_m: f64,
+    pub lateral_error_m: f64,
+    pub heading_error_rad: f64,
+    /// Path curvature at the control point's foot.
+    pub curvature_per_m: f64,
+    /// Distance to the virtual obstacle (m), +inf on free road.
+    pub virtual_obstacle_m: f64,
+}
+
+/// Per-vehicle controller state.
+#[derive(Debug, Clone)]
+pub struct Controller {
+    track: Arc<Track>,
+    cfg: ControllerConfig,
+    gains: LateralGains,
+    max_steering_rad: f64,
+    hint_rear: Option<f64>,
+    hint_front: Option<f64>,
+    hint_cp: Option<f64>,
+}
+
+impl Controller {
+    /// Validates the configuration and vehicle; errors name the key.
+    pub fn new(track: Arc<Track>, cfg: ControllerConfig, vehicle: &VehicleParams) -> Result<Self, ConfigError> {
+        cfg.validate()?;
+        validate_vehicle(vehicle)?;
+        let gains = LateralGains {
+            wheelbase_m: vehicle.wheelbase_m,
+            stanley_gain: cfg.stanley_gain,
+            stanley_gain_reverse: cfg.stanley_gain_reverse,
+            stanley_softening_mps: cfg.stanley_softening_mps,
+            target_distance_min_m: cfg.target_distance_min_m,
+            target_distance_gain_s: cfg.target_distance_gain_s,
+            curvature_lookahead_gain_s: cfg.curvature_lookahead_gain_s,
+            pure_pursuit_gain_s: cfg.pure_pursuit_gain_s,
+            pure_pursuit_min_lookahead_m: cfg.pure_pursuit_min_lookahead_m,
+        };
+        Ok(Controller { track, cfg, gains, max_steering_rad: vehicle.max_steering_rad(), hint_rear: None, hint_front: None, hint_cp: None })
+    }
+
+    pub fn config(&self) -> &ControllerConfig {
+        &self.cfg
+    }
+    pub fn track(&self) -> &Arc<Track> {
+        &self.track
+    }
+
+    /// Forgets the projection hints (the next step searches the whole path).
+    pub fn reset(&mut self) {
+        self.hint_rear = None;
+        self.hint_front = None;
+        self.hint_cp = None;
+    }
+
+    /// One step with the configured blend factor.
+    pub fn step(&mut self, measured: &VehicleState, obstacles: &[Obstacle]) -> Result<ControlOutput, StateError> {
+        self.step_with_alpha(measured, self.cfg.lat_blend_factor, obstacles)
+    }
+
+    /// One step with blend factor `alpha` (in [0, 1]; it may change every step).
+    pub fn step_with_alpha(&mut self, measured: &VehicleState, alpha: f64, obstacles: &[Obstacle]) -> Result<ControlOutput, StateError> {
+        measured.check_finite()?;
+        if !(0.0..=1.0).contains(&alpha) {
+            return Err(StateError::Parameter { name: "alpha", value: alpha, message: "must be in [0, 1]" });
+        }
+        let path = &self.track.path;
+        let e = self.gains.wheelbase_m;
+        let dir = self.cfg.direction;
+        let speed = measured.v_mps.abs();
+        let rear_pt = measured.rear();
+        let h = measured.heading_vec();
+        let front_pt: Point2<f64> = rear_pt + h * e;
+
+        let rear = path.project_with(&rear_pt, self.hint_rear);
+        self.hint_rear = Some(rear.s);
+        let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
+            LateralKind::Blend => {
+                let front = path.project_with(&front_pt, self.hint_front);
+                self.hint_front = Some(front.s);
+                let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
+                let dr = rear_command(path, &rear, measured.theta_rad, speed, dir, &self.gains);
+                (alpha, df, dr)
+            }
+            LateralKind::Stanley => {
+                let front = path.project_with(&front_pt, self.hint_front);
+                self.hint_front = Some(front.s);
+                let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
+                (1.0, df, f64::NAN)
+            }
+            LateralKind::PurePursuit => {
+                let dr = pure_pursuit_command(path, (rear_pt.x, rear_pt.y), &rear, measured.theta_rad, speed, dir, &self.gains);
+                (0.0, f64::NAN, dr)
+            }
+        };
+        let raw = match self.cfg.lateral_controller {
+            LateralKind::Blend => blend(alpha, d_front, d_rear),
+            LateralKind::Stanley => d_front,
+            LateralKind::PurePursuit => d_rear,
+        };
+        let steering = raw.clamp(-self.max_steering_rad, self.max_steering_rad);
+
+        let cp_pt = rear_pt + h * (alpha * e);
+        let cp = path.project_with(&cp_pt, self.hint_cp.or(Some(rear.s)));
+        self.hint_cp = Some(cp.s);
+        let th_travel = travel_heading(measured.theta_rad, dir);
+
+        let d_obs = self.track.corridor.ray_cast(path, &rear_pt, th_travel, rear.s, self.cfg.ray_horizon_m);
+        let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
+        Ok(ControlOutput {
+            steering_rad: steering,
+            accel_mps2: lon.accel_mps2,
+            alpha,
+            steering_front_rad: d_front,
+            steering_rear_rad: d_rear,
+            s_rear_m: rear.s,
+            s_m: cp.s,
+            lateral_error_m: cp.lateral_m,
+            heading_error_rad: wrap_angle(th_travel - cp.heading_rad),
+            curvature_per_m: cp.curvature_per_m,
+            virtual_obstacle_m: d_obs.unwrap_or(f64::INFINITY),
+        })
+    }
+}

@@ -1,0 +1,353 @@
+//! Lateral control: Stanley (front axle), the curvature-based rear-axle law,
+//! pure pursuit, the barycentric blend and alpha schedules (SPEC §4).
+//!
+//! All laws are pure functions of errors measured on the path and return a
+//! steering angle (rad, > 0 turns left); the caller clamps it.
+//!
+//! # Rear-axle curvature-based law (paper eq. 5)
+//! `delta_rear = delta_1 + delta_2`:
+//! - `delta_1` is the pure-pursuit steering of the rear axle toward the target
+//!   point `T = foot + d t(s)` on the TANGENT LINE at the rear axle's foot
+//!   point, `d` metres ahead. In the path frame the rear axle sits at lateral
+//!   offset `e` with heading error `e_t`, so in the vehicle frame
+//!   `T = (d cos e_t - e sin e_t, -d sin e_t - e cos e_t)` and
+//!   `delta_1 = atan(2 E y_T / (x_T^2 + y_T^2))`, with `x_T^2 + y_T^2 = d^2 + e^2`.
+//!   This equals the printed `s atan(2E cos(e_t - atan(d/e_d)) / sqrt(e_d^2 + d^2))`
+//!   up to the paper's conventions: with `s = sign(e)`, `e_d = |e|`, the
+//!   printed `e_t` measured in the frame mirrored so that the vehicle is on the
+//!   left (`s e_t` here), and the paper's steering sign opposite to ours:
+//!   `delta_1 = -s atan(2E cos(s e_t - atan(d/e_d)) / sqrt(e_d^2 + d^2))`
+//!   wherever `e_d > 0` ([`rear_first_term_printed`], tested). Because `T` lies
+//!   on the tangent line, `delta_1` carries no curvature: on a circle with zero
+//!   errors it is 0.
+//! - `delta_2 = atan((2E / L) asin(kappa / 2)) = atan(E dtheta / L)` with
+//!   `dtheta = wrap(theta_path(s + L) - theta)`: the chord `kappa = 2 sin(dtheta/2)`
+//!   between the heading and the tangent `L` metres ahead (SPEC). On a circle
+//!   of radius R with zero errors `dtheta = L / R` and `delta_rear = atan(E / R)`.
+//!
+//! # Backward driving (paper eq. 6)
+//! For `v < 0` write `theta' = theta + pi`, `v' = -v > 0`. Then
+//! `x' = v' cos theta'`, `y' = v' sin theta'` and
+//! `theta'' = theta' = v tan(delta)/E = v' tan(-delta)/E`: reversing is a forward
+//! bicycle with heading `theta'`, speed `|v|` and steering `-delta` whose
+//! non-steered axle (the real rear axle) LEADS. Every law is therefore
+//! evaluated with the flipped heading `theta'` (errors along the direction of
+//! travel, the path being traversed in its own direction) and its output is
+//! negated: `delta = -law(theta')`.
+//! - Rear-axle laws (curvature-based, pure pursuit) only use the kinematics of
+//!   the non-steered axle, which are the same as forward: they keep their
+//!   stability as is.
+//! - Stanley at the front axle: reversing, the front axle TRAILS. Linearised on
+//!   a straight path with `delta = -(-e_t' - atan(k e_f / (k_soft + |v|)))`,
+//!   `b = k / (k_soft + |v|)`: `d/dt (e_f, e_t') = |v| [[b, 2], [-b/E, -1/E]] (e_f, e_t')`,
+//!   trace `|v| (b - 1/E)`, determinant `|v|^2 b / E`. It is stable iff
+//!   `0 < b < 1/E`, i.e. `k < (k_soft + |v|) / E`. Forward gains (2 to 3) break
+//!   this, so reversing uses `stanley_gain_reverse` (default 0.3 < k_soft / E,
+//!   stable at every speed). The slow, weakly damped convergence that results
+//!   is the reason the paper's test #6 (backward, alpha = 1) tracks worst.
+
+use crate::path::{wrap_angle, Path, Projection};
+use crate::vehicle::Direction;
+use serde::{Deserialize, Serialize};
+
+/// Stanley's law at the front axle: `-e_theta - atan(k e / (k_soft + |v|))`.
+#[inline]
+pub fn stanley(e_front_m: f64, e_theta_front_rad: f64, speed_abs_mps: f64, gain: f64, softening_mps: f64) -> f64 {
+    -e_theta_front_rad - (gain * e_front_m / (softening_mps + speed_abs_mps)).atan()
+}
+
+/// Steering that puts the rear axle on a circle through a target at
+/// `(x, y)` in the vehicle frame: `atan(2 E y / (x^2 + y^2))`; 0 at the target itself.
+#[inline]
+pub fn pursuit_steering(wheelbase_m: f64, x: f64, y: f64) -> f64 {
+    let d2 = x * x + y * y;
+    if d2 < 1e-12 {
+        0.0
+    } else {
+        (2.0 * wheelbase_m * y / d2).atan()
+    }
+}
+
+/// First term of the rear law, geometric form (see module docs).
+#[inline]
+pub fn rear_first_term(wheelbase_m: f64, e_m: f64, e_theta_rad: f64, d_m: f64) -> f64 {
+    let (s, c) = e_theta_rad.sin_cos();
+    pursuit_steering(wheelbase_m, d_m * c - e_m * s, -d_m * s - e_m * c)
+}
+
+/// First term of the rear law exactly as printed in the paper (eq. 5), mapped
+/// to our conventions; defined only for `e != 0`.
+pub fn rear_first_term_printed(wheelbase_m: f64, e_m: f64, e_theta_rad: f64, d_m: f64) -> Option<f64> {
+    if e_m == 0.0 {
+        return None;
+    }
+    let s = e_m.signum();
+    let e_d = e_m.abs();
+    let arg = 2.0 * wheelbase_m * (s * e_theta_rad - (d_m / e_d).atan()).cos() / (e_d * e_d + d_m * d_m).sqrt();
+    Some(-s * arg.atan())
+}
+
+/// Second term of the rear law: `atan((2E/L) asin(kappa/2))` with the chord
+/// `kappa = 2 sin(dtheta/2)`, i.e. `atan(E dtheta / L)`.
+#[inline]
+pub fn rear_second_term(wheelbase_m: f64, dtheta_rad: f64, lookahead_m: f64) -> f64 {
+    let kappa = 2.0 * (0.5 * dtheta_rad).sin();
+    (2.0 * wheelbase_m / lookahead_m * (0.5 * kappa).clamp(-1.0, 1.0).asin()).atan()
+}
+
+/// Tuning of the lateral laws (from [`crate::config::ControllerConfig`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LateralGains {
+    pub wheelbase_m: f64,
+    pub stanley_gain: f64,
+    pub stanley_gain_reverse: f64,
+    pub stanley_softening_mps: f64,
+    pub target_distance_min_m: f64,
+    pub target_distance_gain_s: f64,
+    pub curvature_lookahead_gain_s: f64,
+    pub pure_pursuit_gain_s: f64,
+    pub pure_pursuit_min_lookahead_m: f64,
+}
+
+impl LateralGains {
+    /// Target distance `d` of the rear law.
+    pub fn target_distance(&self, speed_abs: f64) -> f64 {
+        self.target_distance_min_m.max(self.target_distance_gain_s * speed_abs)
+    }
+    /// Curvature look-ahead `L` of the rear law.
+    pub fn curvature_lookahead(&self, speed_abs: f64) -> f64 {
+        (2.0 * self.wheelbase_m).max(self.curvature_lookahead_gain_s * speed_abs)
+    }
+}
+
+/// Heading along the direction of travel (flipped by pi when reversing).
+#[inline]
+pub fn travel_heading(theta_rad: f64, direction: Direction) -> f64 {
+    match direction {
+        Direction::Forward => theta_rad,
+        Direction::Backward => wrap_angle(theta_rad + std::f64::consts::PI),
+    }
+}
+
+/// Stanley command at the front axle for either direction.
+pub fn stanley_command(front: &Projection, theta_rad: f64, speed_abs: f64, direction: Direction, g: &LateralGains) -> f64 {
+    let th = travel_heading(theta_rad, direction);
+    let e_theta = wrap_angle(th - front.heading_rad);
+    let k = match direction {
+        Direction::Forward => g.stanley_gain,
+        Direction::Backward => g.stanley_gain_reverse,
+    };
+    let law = stanley(front.lateral_m, e_theta, speed_abs, k, g.stanley_softening_mps);
+    direction.sign() * law
+}
+
+/// Curvature-based command at the rear axle for either direction.
+pub fn rear_command(path: &Path, rear: &Projection, theta_rad: f64, speed_abs: f64, direction: Direction, g: &LateralGains) -> f64 {
+    let th = travel_heading(theta_rad, direction);
+    let e_theta = wrap_angle(th - rear.heading_rad);
+    let d = g.target_distance(speed_abs);
+    let l = g.curvature_lookahead(speed_abs);
+    let dtheta = wrap_angle(path.heading_at(rear.s + l) - th);
+    let law = rear_first_term(g.wheelbase_m, rear.lateral_m, e_theta, d) + rear_second_term(g.wheelbase_m, dtheta, l);
+    direction.sign() * law
+}
+
+/// Pure pursuit at the rear axle toward the path point `l_d` ahead of the foot.
+pub fn pure_pursuit_command(
+    path: &Path,
+    rear_xy: (f64, f64),
+    rear: &Projection,
+    theta_rad: f64,
+    speed_abs: f64,
+    direction: Direction,
+    g: &LateralGains,
+) -> f64 {
+    let th = travel_heading(theta_rad, direction);
+    let ld = g.pure_pursuit_gain_s * speed_abs + g.pure_pursuit_min_lookahead_m;
+    let t = path.point_at(rear.s + ld);
+    let (dx, dy) = (t.x - rear_xy.0, t.y - rear_xy.1);
+    let (s, c) = th.sin_cos();
+    let law = pursuit_steering(g.wheelbase_m, c * dx + s * dy, -s * dx + c * dy);
+    direction.sign() * law
+}
+
+/// The paper's blend (eq. 4).
+#[inline]
+pub fn blend(alpha: f64, delta_front: f64, delta_rear: f64) -> f64 {
+    alpha * delta_front + (1.0 - alpha) * delta_rear
+}
+
+/// How alpha evolves over time. Values are clamped to [0, 1].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum AlphaSchedule {
+    Constant { alpha: f64 },
+    /// The paper's moving point: `0.5 (sin(omega t) + 1)`.
+    Sine { omega_rad_s: f64 },
+    /// Piecewise linear through `(t, alpha)` knots sorted by time; held
+    /// constant before the first and after the last knot.
+    Piecewise { knots: Vec<(f64, f64)> },
+}
+
+impl AlphaSchedule {
+    pub fn alpha_at(&self, t: f64) -> f64 {
+        let a = match self {
+            AlphaSchedule::Constant { alpha } => *alpha,
+            AlphaSchedule::Sine { omega_rad_s } => 0.5 * ((omega_rad_s * t).sin() + 1.0),
+            AlphaSchedule::Piecewise { knots } => {
+                if knots.is_empty() {
+                    return 0.5;
+                }
+                let i = knots.partition_point(|k| k.0 <= t);
+                if i == 0 {
+                    knots[0].1
+                } else if i == knots.len() {
+                    knots[knots.len() - 1].1
+                } else {
+                    let (t0, a0) = knots[i - 1];
+                    let (t1, a1) = knots[i];
+                    a0 + (a1 - a0) * (t - t0) / (t1 - t0)
+                }
+            }
+        };
+        if a.is_finite() {
+            a.clamp(0.0, 1.0)
+        } else {
+            0.5
+        }
+    }
+
+    /// Checks the schedule; the error text names what is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        match self {
+            AlphaSchedule::Constant { alpha } => {
+                if !(0.0..=1.0).contains(alpha) {
+                    return Err(format!("alpha = {alpha} must be in [0, 1]"));
+                }
+            }
+            AlphaSchedule::Sine { omega_rad_s } => {
+                if !omega_rad_s.is_finite() {
+                    return Err(format!("omega = {omega_rad_s} must be finite"));
+                }
+            }
+            AlphaSchedule::Piecewise { knots } => {
+                if knots.is_empty() {
+                    return Err("a piecewise schedule needs at least one (t, alpha) knot".into());
+                }
+                for (i, (t, a)) in knots.iter().enumerate() {
+                    if !t.is_finite() || !(0.0..=1.0).contains(a) {
+                        return Err(format!("knot {i} = ({t}, {a}): t must be finite and alpha in [0, 1]"));
+                    }
+                    if i > 0 && *t <= knots[i - 1].0 {
+                        return Err(format!("knot {i}: times must increase strictly"));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::PI;
+
+    fn gains() -> LateralGains {
+        LateralGains {
+            wheelbase_m: 2.6,
+            stanley_gain: 2.5,
+            stanley_gain_reverse: 0.3,
+            stanley_softening_mps: 1.0,
+            target_distance_min_m: 2.0,
+            target_distance_gain_s: 2.0,
+            curvature_lookahead_gain_s: 2.0,
+            pure_pursuit_gain_s: 1.0,
+            pure_pursuit_min_lookahead_m: 3.0,
+        }
+    }
+
+    #[test]
+    fn geometric_first_term_equals_printed_formula() {
+        let mut n = 0;
+        for &e in &[-4.0, -1.0, -0.01, 0.02, 0.5, 3.0, 10.0] {
+            for &et in &[-1.2, -0.3, 0.0, 0.1, 0.7, 1.4] {
+                for &d in &[0.5, 2.0, 6.0, 30.0] {
+                    let g = rear_first_term(2.6, e, et, d);
+                    let p = rear_first_term_printed(2.6, e, et, d).unwrap();
+                    assert!((g - p).abs() < 1e-12, "e={e} et={et} d={d}: {g} vs {p}");
+                    n += 1;
+                }
+            }
+        }
+        assert_eq!(n, 168);
+        assert_eq!(rear_first_term_printed(2.6, 0.0, 0.1, 2.0), None);
+        assert!(rear_first_term(2.6, 0.0, 0.0, 0.0).is_finite());
+    }
+
+    #[test]
+    fn first_term_steers_back_toward_the_path() {
+        assert!(rear_first_term(2.6, 1.0, 0.0, 3.0) < 0.0, "left of the path: steer right");
+        assert!(rear_first_term(2.6, -1.0, 0.0, 3.0) > 0.0);
+        assert!(stanley(1.0, 0.0, 3.0, 2.5, 1.0) < 0.0);
+        assert!(stanley(0.0, 0.2, 3.0, 2.5, 1.0) < 0.0);
+    }
+
+    #[test]
+    fn second_term_is_ackermann_of_chord() {
+        for &dth in &[-1.0, -0.2, 0.0, 0.3, 1.5] {
+            let l = 6.0;
+            assert!((rear_second_term(2.6, dth, l) - (2.6 * dth / l).atan()).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn rear_law_on_circle_with_zero_errors_gives_ackermann() {
+        let g = gains();
+        for r in [10.0, 50.0, 200.0] {
+            let path = Path::circle(r, 1e-4).unwrap();
+            for &v in &[1.0, 3.0, 10.0] {
+                for s in [0.0, 17.0, 40.0] {
+                    let p = path.point_at(s);
+                    let th = path.heading_at(s);
+                    let pr = path.project(&p);
+                    let d = rear_command(&path, &pr, th, v, Direction::Forward, &g);
+                    let expected = (2.6 / r).atan();
+                    assert!((d - expected).abs() < 1e-3, "R={r} v={v} s={s}: {d} vs {expected}");
+                    // Backwards along the same path (heading flipped): the
+                    // steering that keeps the rear axle on the circle is the negative.
+                    let db = rear_command(&path, &pr, th + PI, v, Direction::Backward, &g);
+                    assert!((db + expected).abs() < 1e-3, "backward R={r}: {db}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn schedules() {
+        let s = AlphaSchedule::Sine { omega_rad_s: 0.2 };
+        assert!((s.alpha_at(0.0) - 0.5).abs() < 1e-12);
+        assert!((s.alpha_at(PI / 0.4) - 1.0).abs() < 1e-12);
+        let p = AlphaSchedule::Piecewise { knots: vec![(0.0, 0.0), (10.0, 1.0), (20.0, 0.5)] };
+        assert_eq!(p.alpha_at(-1.0), 0.0);
+        assert!((p.alpha_at(5.0) - 0.5).abs() < 1e-12);
+        assert!((p.alpha_at(15.0) - 0.75).abs() < 1e-12);
+        assert_eq!(p.alpha_at(99.0), 0.5);
+        assert!(p.validate().is_ok());
+        assert!(AlphaSchedule::Piecewise { knots: vec![(1.0, 0.0), (1.0, 1.0)] }.validate().is_err());
+        assert!(AlphaSchedule::Constant { alpha: 1.2 }.validate().is_err());
+        assert_eq!(AlphaSchedule::Constant { alpha: f64::NAN }.alpha_at(0.0), 0.5);
+    }
+
+    #[test]
+    fn backward_stanley_linearisation_is_stable_with_reverse_gain() {
+        // Eigenvalues of |v| [[b, 2], [-b/E, -1/E]] have negative real part iff 0 < b < 1/E.
+        let g = gains();
+        for &v in &[0.2, 1.0, 3.0, 10.0] {
+            let b = g.stanley_gain_reverse / (g.stanley_softening_mps + v);
+            let trace = v * (b - 1.0 / g.wheelbase_m);
+            let det = v * v * b / g.wheelbase_m;
+            assert!(trace < 0.0 && det > 0.0, "v={v}");
+        }
+    }
+}

@@ -1,0 +1,819 @@
+//! Reference tracks: polylines with arc length, projection and curvature (SPEC §3).
+//!
+//! A [`Path`] is a polyline in the world frame (x east, y north, metres) with
+//! cumulative arc length `s`, an `is_closed` flag and optional per-point
+//! right/left widths (TUM format). It answers the questions every controller
+//! asks: where is my foot point, how far am I from the path (signed, left
+//! positive), which way does the path go there, how curved is it, where is
+//! the point `d` metres further on.
+//!
+//! Choices written down here:
+//! - The lateral distance is measured to the polyline itself (chords), the
+//!   tangent heading is interpolated linearly along each segment between the
+//!   vertex tangents (bisectors of the adjacent segments). The heading is thus
+//!   continuous, so the heading error does not jump at every vertex of a
+//!   discretised track (the "fast oscillations" the paper notes).
+//! - Curvature at `s` is the wrapped heading change over
+//!   `tangent_sampling_width_m` (centred), divided by that width.
+//! - A hinted projection ([`Path::project_hinted`]) scans the segments within
+//!   `[s_hint - window_back, s_hint + window_ahead]` and, if the best foot point
+//!   lies on the edge of that window, keeps walking while the distance
+//!   decreases. One step is O(1) and the projection cannot jump to another leg
+//!   of the track passing close by. The full search ([`Path::project`]) uses
+//!   chunk bounding boxes so long paths are not scanned segment by segment.
+//! - Open paths are extended along their end tangents when asked for a point
+//!   beyond either end.
+
+use crate::error::PathError;
+use nalgebra::{Point2, Vector2};
+use std::f64::consts::PI;
+
+/// Wraps an angle to (-pi, pi].
+#[inline]
+pub fn wrap_angle(a: f64) -> f64 {
+    let mut r = a % (2.0 * PI);
+    if r <= -PI {
+        r += 2.0 * PI;
+    } else if r > PI {
+        r -= 2.0 * PI;
+    }
+    r
+}
+
+#[inline]
+fn cross(a: &Vector2<f64>, b: &Vector2<f64>) -> f64 {
+    a.x * b.y - a.y * b.x
+}
+
+/// The nearest point of a path to a query point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Projection {
+    /// Arc length of the foot point, in [0, length].
+    pub s: f64,
+    /// Foot point on the polyline.
+    pub foot: Point2<f64>,
+    /// Tangent heading at the foot point (rad, CCW from +x).
+    pub heading_rad: f64,
+    /// Signed lateral distance of the query point, > 0 on the left.
+    pub lateral_m: f64,
+    /// Curvature at the foot point (1/m, > 0 turning left).
+    pub curvature_per_m: f64,
+    /// Index of the segment holding the foot point.
+    pub segment: usize,
+}
+
+const CHUNK: usize = 32;
+
+/// Widths of a track at one point (metres from the centreline along the normal).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Widths {
+    pub right_m: f64,
+    pub left_m: f64,
+}
+
+/// A reference track. See the module docs for the conventions.
+#[derive(Debug, Clone)]
+pub struct Path {
+    points: Vec<Point2<f64>>,
+    /// Cumulative arc length at each segment start; `s[n_seg] = length`.
+    s: Vec<f64>,
+    seg_dir: Vec<Vector2<f64>>,
+    seg_len: Vec<f64>,
+    vertex_heading: Vec<f64>,
+    widths: Option<Vec<Widths>>,
+    closed: bool,
+    length: f64,
+    chunk_boxes: Vec<(Point2<f64>, Point2<f64>)>,
+    tangent_sampling_width_m: f64,
+    window_back_m: f64,
+    window_ahead_m: f64,
+}
+
+impl Path {
+    /// Builds a path from points (and optional widths). Consecutive duplicate
+    /// points are dropped (for a closed path, also a last point equal to the
+    /// first). Errors name the offending point by its index in the input.
+    pub fn new(points: &[[f64; 2]], widths: Option<&[Widths]>, closed: bool) -> Result<Self, PathError> {
+        Self::with_locations(points, widths, closed, |i| format!("point {i}"))
+    }
+
+    fn with_locations(
+        points: &[[f64; 2]],
+        widths: Option<&[Widths]>,
+        closed: bool,
+        location: impl Fn(usize) -> String,
+    ) -> Result<Self, PathError> {
+        if let Some(w) = widths {
+            if w.len() != points.len() {
+                return Err(PathError::WidthCount { widths: w.len(), points: points.len() });
+            }
+        }
+        for (i, p) in points.iter().enumerate() {
+            for (what, v) in [("x", p[0]), ("y", p[1])] {
+                if !v.is_finite() {
+                    return Err(PathError::NonFinite { location: location(i), what, value: v });
+                }
+            }
+            if let Some(w) = widths {
+                for (what, v) in [("right width", w[i].right_m), ("left width", w[i].left_m)] {
+                    if !v.is_finite() {
+                        return Err(PathError::NonFinite { location: location(i), what, value: v });
+                    }
+                    if v < 0.0 {
+                        return Err(PathError::NegativeWidth { location: location(i), what, value: v });
+                    }
+                }
+            }
+        }
+        const EPS: f64 = 1e-9;
+        let mut pts: Vec<Point2<f64>> = Vec::with_capacity(points.len());
+        let mut ws: Vec<Widths> = Vec::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
+            let q = Point2::new(p[0], p[1]);
+            if let Some(last) = pts.last() {
+                if (q - last).norm() <= EPS {
+                    continue;
+                }
+            }
+            pts.push(q);
+            if let Some(w) = widths {
+                ws.push(w[i]);
+            }
+        }
+        if closed && pts.len() > 2 && (pts[0] - pts[pts.len() - 1]).norm() <= EPS {
+            pts.pop();
+            if widths.is_some() {
+                ws.pop();
+            }
+        }
+        if pts.len() < 2 {
+            return Err(PathError::TooFewPoints(pts.len()));
+        }
+        // A closed path of two points is a degenerate back-and-forth; treat it as open.
+        let closed = closed && pts.len() >= 3;
+        let n = pts.len();
+        let n_seg = if closed { n } else { n - 1 };
+        let mut seg_dir = Vec::with_capacity(n_seg);
+        let mut seg_len = Vec::with_capacity(n_seg);
+        let mut s = Vec::with_capacity(n_seg + 1);
+        s.push(0.0);
+        for i in 0..n_seg {
+            let d = pts[(i + 1) % n] - pts[i];
+            let l = d.norm();
+            seg_dir.push(d / l);
+            seg_len.push(l);
+            s.push(s[i] + l);
+        }
+        let length = s[n_seg];
+        let vertex_heading = (0..n)
+            .map(|i| {
+                let (prev, next) = if closed {
+                    (Some((i + n_seg - 1) % n_seg), Some(i % n_seg))
+                } else {
+                    (i.checked_sub(1), if i < n_seg { Some(i) } else { None })
+                };
+                let t = match (prev, next) {
+                    (Some(a), Some(b)) => {
+                        let sum = seg_dir[a] + seg_dir[b];
+                        if sum.norm() < 1e-9 {
+                            seg_dir[b]
+                        } else {
+                            sum
+                        }
+                    }
+                    (Some(a), None) => seg_dir[a],
+                    (None, Some(b)) => seg_dir[b],
+                    (None, None) => unreachable!("a path has at least one segment"),
+                };
+                t.y.atan2(t.x)
+            })
+            .collect();
+        let chunk_boxes = (0..n_seg)
+            .step_by(CHUNK)
+            .map(|start| {
+                let mut lo = pts[start];
+                let mut hi = pts[start];
+                for k in start..(start + CHUNK).min(n_seg) {
+                    for q in [pts[k], pts[(k + 1) % n]] {
+                        lo = Point2::new(lo.x.min(q.x), lo.y.min(q.y));
+                        hi = Point2::new(hi.x.max(q.x), hi.y.max(q.y));
+                    }
+                }
+                (lo, hi)
+            })
+            .collect();
+        Ok(Path {
+            points: pts,
+            s,
+            seg_dir,
+            seg_len,
+            vertex_heading,
+            widths: widths.map(|_| ws),
+            closed,
+            length,
+            chunk_boxes,
+            tangent_sampling_width_m: 2.0,
+            window_back_m: 5.0,
+            window_ahead_m: 15.0,
+        })
+    }
+
+    /// Loads a TUM race-track csv (`# x_m,y_m,w_tr_right_m,w_tr_left_m`).
+    /// Lines starting with `#` are comments; two columns (no widths) are
+    /// accepted too. Errors name the file and line.
+    pub fn from_tum_csv(file: &std::path::Path, closed: bool) -> Result<Self, PathError> {
+        let name = file.display().to_string();
+        let text = std::fs::read_to_string(file)
+            .map_err(|e| PathError::Io { file: name.clone(), message: e.to_string() })?;
+        Self::from_tum_str(&text, &name, closed)
+    }
+
+    /// Parses TUM csv text; `source_name` is used in error messages.
+    pub fn from_tum_str(text: &str, source_name: &str, closed: bool) -> Result<Self, PathError> {
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .comment(Some(b'#'))
+            .flexible(true)
+            .trim(csv::Trim::All)
+            .from_reader(text.as_bytes());
+        let mut points = Vec::new();
+        let mut widths = Vec::new();
+        let mut lines = Vec::new();
+        let mut ncols = None;
+        for rec in reader.records() {
+            let rec = rec.map_err(|e| PathError::Parse {
+                file: source_name.to_string(),
+                line: e.position().map(|p| p.line()).unwrap_or(0),
+                message: e.to_string(),
+            })?;
+            let line = rec.position().map(|p| p.line()).unwrap_or(0);
+            if rec.iter().all(|f| f.is_empty()) {
+                continue;
+            }
+            let perr = |message: String| PathError::Parse { file: source_name.to_string(), line, message };
+            let vals: Vec<f64> = rec
+                .iter()
+                .enumerate()
+                .map(|(c, f)| f.parse::<f64>().map_err(|_| perr(format!("column {} is not a number: {f:?}", c + 1))))
+                .collect::<Result<_, _>>()?;
+            if vals.len() != 2 && vals.len() != 4 {
+                return Err(perr(format!("expected 2 or 4 columns (x_m,y_m[,w_tr_right_m,w_tr_left_m]), got {}", vals.len())));
+            }
+            match ncols {
+                None => ncols = Some(vals.len()),
+                Some(c) if c != vals.len() => {
+                    return Err(perr(format!("expected {c} columns like the first data line, got {}", vals.len())))
+                }
+                _ => {}
+            }
+            points.push([vals[0], vals[1]]);
+            if vals.len() == 4 {
+                widths.push(Widths { right_m: vals[2], left_m: vals[3] });
+            }
+            lines.push(line);
+        }
+        let w = if widths.is_empty() { None } else { Some(widths.as_slice()) };
+        Self::with_locations(&points, w, closed, |i| format!("{source_name}: line {}", lines[i])).map_err(|e| match e {
+            PathError::TooFewPoints(n) => PathError::Parse {
+                file: source_name.to_string(),
+                line: lines.last().copied().unwrap_or(0),
+                message: format!("a track needs at least 2 distinct points, got {n}"),
+            },
+            other => other,
+        })
+    }
+
+    /// A straight line from the origin along +x.
+    pub fn straight(length_m: f64, spacing_m: f64) -> Result<Self, PathError> {
+        check_positive("length_m", length_m)?;
+        check_positive("spacing_m", spacing_m)?;
+        let n = (length_m / spacing_m).ceil().max(1.0) as usize;
+        let pts: Vec<[f64; 2]> = (0..=n).map(|i| [length_m * i as f64 / n as f64, 0.0]).collect();
+        Self::new(&pts, None, false)
+    }
+
+    /// A closed counter-clockwise circle of radius `radius_m` centred at
+    /// (0, radius_m), starting at the origin heading +x. The vertex count is
+    /// chosen so that the chord sagitta stays below `max_sagitta_m`.
+    pub fn circle(radius_m: f64, max_sagitta_m: f64) -> Result<Self, PathError> {
+        check_positive("radius_m", radius_m)?;
+        check_positive("max_sagitta_m", max_sagitta_m)?;
+        // sagitta = R (1 - cos(dphi / 2)) <= max  =>  dphi <= 2 acos(1 - max/R)
+        let dphi = 2.0 * (1.0 - (max_sagitta_m / radius_m).min(1.0)).acos();
+        let n = ((2.0 * PI / dphi).ceil() as usize).clamp(8, 1_000_000);
+        let pts: Vec<[f64; 2]> = (0..n)
+            .map(|i| {
+                let phi = 2.0 * PI * i as f64 / n as f64 - PI / 2.0;
+                [radius_m * phi.cos(), radius_m + radius_m * phi.sin()]
+            })
+            .collect();
+        Self::new(&pts, None, true)
+    }
+
+    /// The built-in closed test track: straights, arcs of radius 25 to 40 m
+    /// turning both ways, joined by clothoids (curvature linear in `s`), so
+    /// curvature is continuous. The lap is point-symmetric: the second half is
+    /// the first rotated by pi, which closes the loop exactly. About 1.2 km,
+    /// sampled every `spacing_m`.
+    pub fn test_track(spacing_m: f64) -> Result<Self, PathError> {
+        check_positive("spacing_m", spacing_m)?;
+        // (length, curvature at start, curvature at end) of each piece of half a lap.
+        let k1 = 1.0 / 30.0;
+        let k2 = -1.0 / 40.0;
+        let k3 = 1.0 / 25.0;
+        let fixed_turn = (20.0 * k1) + (15.0 * k2) + 40.0 * k2 + (15.0 * k3);
+        // The two left arcs share what is left of the half-lap turn of pi.
+        let rest = PI - fixed_turn;
+        let arc1 = 0.55 * rest / k1;
+        let arc3 = 0.45 * rest / k3;
+        let half: [(f64, f64, f64); 12] = [
+            (80.0, 0.0, 0.0),
+            (20.0, 0.0, k1),
+            (arc1, k1, k1),
+            (20.0, k1, 0.0),
+            (40.0, 0.0, 0.0),
+            (15.0, 0.0, k2),
+            (40.0, k2, k2),
+            (15.0, k2, 0.0),
+            (30.0, 0.0, 0.0),
+            (15.0, 0.0, k3),
+            (arc3, k3, k3),
+            (15.0, k3, 0.0),
+        ];
+        let half_len: f64 = half.iter().map(|p| p.0).sum();
+        let n_half = (half_len / spacing_m).ceil() as usize;
+        let ds = half_len / n_half as f64;
+        let curvature = |s: f64| -> f64 {
+            let mut start = 0.0;
+            for &(l, a, b) in &half {
+                if s <= start + l {
+                    return a + (b - a) * (s - start) / l;
+                }
+                start += l;
+            }
+            0.0
+        };
+        // Integrate heading and position with fine sub-steps (midpoint rule).
+        let sub = 20;
+        let h = ds / sub as f64;
+        let (mut x, mut y, mut th) = (0.0f64, 0.0f64, 0.0f64);
+        let mut pts = vec![[x, y]];
+        for i in 0..n_half {
+            for j in 0..sub {
+                let s0 = i as f64 * ds + j as f64 * h;
+                let th_mid = th + 0.5 * h * curvature(s0 + 0.25 * h) ;
+                x += h * th_mid.cos();
+                y += h * th_mid.sin();
+                th += h * curvature(s0 + 0.5 * h);
+            }
+            pts.push([x, y]);
+        }
+        // Second half: the first rotated by pi about the half-lap end point.
+        let (bx, by) = (x, y);
+        for i in 1..n_half {
+            let p = pts[i];
+            pts.push([bx - p[0], by - p[1]]);
+        }
+        Self::new(&pts, None, true)
+    }
+
+    /// A copy with every coordinate and width multiplied by `factor` (> 0).
+    pub fn scaled(&self, factor: f64) -> Result<Self, PathError> {
+        check_positive("scale", factor)?;
+        let pts: Vec<[f64; 2]> = self.points.iter().map(|p| [p.x * factor, p.y * factor]).collect();
+        let ws: Option<Vec<Widths>> = self
+            .widths
+            .as_ref()
+            .map(|w| w.iter().map(|w| Widths { right_m: w.right_m * factor, left_m: w.left_m * factor }).collect());
+        let mut p = Self::new(&pts, ws.as_deref(), self.closed)?;
+        p.tangent_sampling_width_m = self.tangent_sampling_width_m;
+        p.window_back_m = self.window_back_m;
+        p.window_ahead_m = self.window_ahead_m;
+        Ok(p)
+    }
+
+    /// Sets the width over which curvature is sampled (metres, > 0).
+    pub fn with_tangent_sampling_width(mut self, width_m: f64) -> Result<Self, PathError> {
+        check_positive("tangent_sampling_width_m", width_m)?;
+        self.tangent_sampling_width_m = width_m;
+        Ok(self)
+    }
+
+    /// Sets the hinted-projection search window (metres behind and ahead of the hint).
+    pub fn with_search_window(mut self, back_m: f64, ahead_m: f64) -> Result<Self, PathError> {
+        check_positive("window_back_m", back_m)?;
+        check_positive("window_ahead_m", ahead_m)?;
+        self.window_back_m = back_m;
+        self.window_ahead_m = ahead_m;
+        Ok(self)
+    }
+
+    pub fn len_points(&self) -> usize {
+        self.points.len()
+    }
+    pub fn n_segments(&self) -> usize {
+        self.seg_len.len()
+    }
+    pub fn length(&self) -> f64 {
+        self.length
+    }
+    pub fn is_closed(&self) -> bool {
+        self.closed
+    }
+    pub fn points(&self) -> &[Point2<f64>] {
+        &self.points
+    }
+    pub fn widths(&self) -> Option<&[Widths]> {
+        self.widths.as_deref()
+    }
+    pub fn tangent_sampling_width(&self) -> f64 {
+        self.tangent_sampling_width_m
+    }
+    /// Arc length at each vertex (for a closed path, without the closing vertex).
+    pub fn vertex_s(&self) -> &[f64] {
+        &self.s[..self.points.len()]
+    }
+
+    /// Maps `s` into [0, length) on closed paths; leaves it on open ones.
+    #[inline]
+    pub fn wrap_s(&self, s: f64) -> f64 {
+        if self.closed {
+            let r = s.rem_euclid(self.length);
+            if r >= self.length {
+                0.0
+            } else {
+                r
+            }
+        } else {
+            s
+        }
+    }
+
+    /// Signed arc distance from `from` to `to` (shortest way round on closed paths).
+    #[inline]
+    pub fn arc_delta(&self, from: f64, to: f64) -> f64 {
+        let d = to - from;
+        if self.closed {
+            let l = self.length;
+            let r = d.rem_euclid(l);
+            if r > 0.5 * l {
+                r - l
+            } else {
+                r
+            }
+        } else {
+            d
+        }
+    }
+
+    /// Segment index and offset into it for arc length `s` (clamped to the
+    /// first/last segment on open paths; offset may be negative or exceed the
+    /// segment length there, which extrapolates).
+    #[inline]
+    fn locate(&self, s: f64) -> (usize, f64) {
+        let s = self.wrap_s(s);
+        let n_seg = self.seg_len.len();
+        let k = self.s[1..n_seg].partition_point(|&b| b <= s);
+        (k, s - self.s[k])
+    }
+
+    #[inline]
+    fn seg_heading(&self, k: usize, offset: f64) -> f64 {
+        let n = self.points.len();
+        let a = self.vertex_heading[k];
+        let b = self.vertex_heading[(k + 1) % n];
+        let u = (offset / self.seg_len[k]).clamp(0.0, 1.0);
+        wrap_angle(a + u * wrap_angle(b - a))
+    }
+
+    /// Index of the segment holding arc length `s`.
+    pub fn segment_at(&self, s: f64) -> usize {
+        self.locate(s).0
+    }
+
+    /// Point at arc length `s`.
+    pub fn point_at(&self, s: f64) -> Point2<f64> {
+        let (k, off) = self.locate(s);
+        self.points[k] + self.seg_dir[k] * off
+    }
+
+    /// Tangent heading at arc length `s` (interpolated, continuous).
+    pub fn heading_at(&self, s: f64) -> f64 {
+        let (k, off) = self.locate(s);
+        self.seg_heading(k, off)
+    }
+
+    /// Unit tangent at arc length `s`.
+    pub fn tangent_at(&self, s: f64) -> Vector2<f64> {
+        let h = self.heading_at(s);
+        Vector2::new(h.cos(), h.sin())
+    }
+
+    /// Curvature at `s`: centred heading difference over the sampling width
+    /// (shifted inside the path at the ends of an open path).
+    pub fn curvature_at(&self, s: f64) -> f64 {
+        self.curvature_over(s, self.tangent_sampling_width_m)
+    }
+
+    /// Curvature at `s` sampled over `width_m`.
+    pub fn curvature_over(&self, s: f64, width_m: f64) -> f64 {
+        let w = width_m.min(self.length);
+        if !(w > 0.0) {
+            return 0.0;
+        }
+        let (mut a, mut b) = (s - 0.5 * w, s + 0.5 * w);
+        if !self.closed {
+            if a < 0.0 {
+                a = 0.0;
+                b = w;
+            } else if b > self.length {
+                b = self.length;
+                a = self.length - w;
+            }
+        }
+        wrap_angle(self.heading_at(b) - self.heading_at(a)) / w
+    }
+
+    /// Widths at `s`, interpolated between vertices; `None` if the path has none.
+    pub fn widths_at(&self, s: f64) -> Option<Widths> {
+        let w = self.widths.as_ref()?;
+        let (k, off) = self.locate(s);
+        let u = (off / self.seg_len[k]).clamp(0.0, 1.0);
+        let a = w[k];
+        let b = w[(k + 1) % w.len()];
+        Some(Widths { right_m: a.right_m + u * (b.right_m - a.right_m), left_m: a.left_m + u * (b.left_m - a.left_m) })
+    }
+
+    /// Squared distance from `p` to segment `k`, and the offset of the foot along it.
+    #[inline]
+    fn seg_dist2(&self, k: usize, p: &Point2<f64>) -> (f64, f64) {
+        let a = self.points[k];
+        let d = p - a;
+        let t = d.dot(&self.seg_dir[k]).clamp(0.0, self.seg_len[k]);
+        let foot = a + self.seg_dir[k] * t;
+        ((p - foot).norm_squared(), t)
+    }
+
+    fn make_projection(&self, p: &Point2<f64>, k: usize, t: f64, dist2: f64) -> Projection {
+        let foot = self.points[k] + self.seg_dir[k] * t;
+        let heading = self.seg_heading(k, t);
+        let rel = p - foot;
+        // Side from the segment direction in its interior, from the vertex tangent at its ends.
+        let side_dir = if t > 0.0 && t < self.seg_len[k] {
+            self.seg_dir[k]
+        } else {
+            Vector2::new(heading.cos(), heading.sin())
+        };
+        let c = cross(&side_dir, &rel);
+        let lateral = if c >= 0.0 { dist2.sqrt() } else { -dist2.sqrt() };
+        let s = self.s[k] + t;
+        let s = if self.closed && s >= self.length { s - self.length } else { s };
+        Projection { s, foot, heading_rad: heading, lateral_m: lateral, curvature_per_m: self.curvature_at(s), segment: k }
+    }
+
+    /// Full projection (no hint): the globally nearest point of the polyline.
+    pub fn project(&self, p: &Point2<f64>) -> Projection {
+        let n_seg = self.seg_len.len();
+        let mut order: Vec<(f64, usize)> = self
+            .chunk_boxes
+            .iter()
+            .enumerate()
+            .map(|(c, (lo, hi))| {
+                let dx = (lo.x - p.x).max(0.0).max(p.x - hi.x);
+                let dy = (lo.y - p.y).max(0.0).max(p.y - hi.y);
+                (dx * dx + dy * dy, c)
+            })
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut best = (f64::INFINITY, 0usize, 0.0f64);
+        for (lb, c) in order {
+            if lb > best.0 {
+                break;
+            }
+            for k in c * CHUNK..((c + 1) * CHUNK).min(n_seg) {
+                let (d2, t) = self.seg_dist2(k, p);
+                if d2 < best.0 {
+                    best = (d2, k, t);
+                }
+            }
+        }
+        self.make_projection(p, best.1, best.2, best.0)
+    }
+
+    /// Brute-force projection over every segment (reference for tests).
+    pub fn project_brute_force(&self, p: &Point2<f64>) -> Projection {
+        let mut best = (f64::INFINITY, 0usize, 0.0f64);
+        for k in 0..self.seg_len.len() {
+            let (d2, t) = self.seg_dist2(k, p);
+            if d2 < best.0 {
+                best = (d2, k, t);
+            }
+        }
+        self.make_projection(p, best.1, best.2, best.0)
+    }
+
+    /// Windowed projection around the hint `hint_s` (see module docs). A
+    /// non-finite hint falls back to the full search.
+    pub fn project_hinted(&self, p: &Point2<f64>, hint_s: f64) -> Projection {
+        if !hint_s.is_finite() {
+            return self.project(p);
+        }
+        let n_seg = self.seg_len.len();
+        let (k0, _) = self.locate(hint_s.clamp(
+            if self.closed { f64::NEG_INFINITY } else { 0.0 },
+            if self.closed { f64::INFINITY } else { self.length },
+        ));
+        let hint = self.wrap_s(hint_s);
+        let mut best = {
+            let (d2, t) = self.seg_dist2(k0, p);
+            (d2, k0, t)
+        };
+        let mut scanned = 1usize;
+        // Forward.
+        let mut last_fwd = k0;
+        let mut k = k0;
+        loop {
+            if scanned >= n_seg {
+                break;
+            }
+            let next = if self.closed { (k + 1) % n_seg } else if k + 1 < n_seg { k + 1 } else { break };
+            let ahead = self.arc_delta(hint, self.s[next]);
+            let ahead = if self.closed && ahead < 0.0 { ahead + self.length } else { ahead };
+            if ahead > self.window_ahead_m {
+                break;
+            }
+            k = next;
+            scanned += 1;
+            last_fwd = k;
+            let (d2, t) = self.seg_dist2(k, p);
+            if d2 < best.0 {
+                best = (d2, k, t);
+            }
+        }
+        // Backward.
+        let mut last_bwd = k0;
+        k = k0;
+        loop {
+            if scanned >= n_seg {
+                break;
+            }
+            let prev = if self.closed { (k + n_seg - 1) % n_seg } else if k > 0 { k - 1 } else { break };
+            let behind = self.arc_delta(self.s[prev] + self.seg_len[prev], hint);
+            let behind = if self.closed && behind < 0.0 { behind + self.length } else { behind };
+            if behind > self.window_back_m {
+                break;
+            }
+            k = prev;
+            scanned += 1;
+            last_bwd = k;
+            let (d2, t) = self.seg_dist2(k, p);
+            if d2 < best.0 {
+                best = (d2, k, t);
+            }
+        }
+        // Walk on past the window edge while the distance keeps decreasing.
+        if best.1 == last_fwd {
+            let mut k = last_fwd;
+            while scanned < n_seg {
+                let next = if self.closed { (k + 1) % n_seg } else if k + 1 < n_seg { k + 1 } else { break };
+                let (d2, t) = self.seg_dist2(next, p);
+                scanned += 1;
+                if d2 < best.0 {
+                    best = (d2, next, t);
+                    k = next;
+                } else {
+                    break;
+                }
+            }
+        } else if best.1 == last_bwd {
+            let mut k = last_bwd;
+            while scanned < n_seg {
+                let prev = if self.closed { (k + n_seg - 1) % n_seg } else if k > 0 { k - 1 } else { break };
+                let (d2, t) = self.seg_dist2(prev, p);
+                scanned += 1;
+                if d2 < best.0 {
+                    best = (d2, prev, t);
+                    k = prev;
+                } else {
+                    break;
+                }
+            }
+        }
+        self.make_projection(p, best.1, best.2, best.0)
+    }
+
+    /// Projects with a hint when one is given, with the full search otherwise.
+    pub fn project_with(&self, p: &Point2<f64>, hint_s: Option<f64>) -> Projection {
+        match hint_s {
+            Some(h) => self.project_hinted(p, h),
+            None => self.project(p),
+        }
+    }
+}
+
+fn check_positive(name: &'static str, v: f64) -> Result<(), PathError> {
+    if v.is_finite() && v > 0.0 {
+        Ok(())
+    } else {
+        Err(PathError::Parameter { name, value: v, message: "must be finite and > 0" })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wrap_angle_range() {
+        for a in [-10.0, -PI, -3.0, 0.0, 3.0, PI, 10.0, 7.0 * PI] {
+            let w = wrap_angle(a);
+            assert!(w > -PI - 1e-12 && w <= PI + 1e-12, "{a} -> {w}");
+            assert!(((a - w) / (2.0 * PI)).fract().abs() < 1e-9 || ((a - w) / (2.0 * PI)).fract().abs() > 1.0 - 1e-9);
+        }
+        assert_eq!(wrap_angle(-PI), PI);
+    }
+
+    #[test]
+    fn straight_projection_and_sign() {
+        let p = Path::straight(100.0, 1.0).unwrap();
+        let pr = p.project(&Point2::new(30.2, 2.5));
+        assert!((pr.s - 30.2).abs() < 1e-12);
+        assert!((pr.lateral_m - 2.5).abs() < 1e-12);
+        assert!(pr.heading_rad.abs() < 1e-12);
+        let pr = p.project(&Point2::new(30.2, -1.5));
+        assert!((pr.lateral_m + 1.5).abs() < 1e-12, "right of the path is negative");
+    }
+
+    #[test]
+    fn circle_heading_and_curvature() {
+        let r = 20.0;
+        let p = Path::circle(r, 1e-4).unwrap();
+        assert!((p.length() - 2.0 * PI * r).abs() < 1e-2);
+        for s in [0.0, 10.0, 33.3, 100.0] {
+            let expected = wrap_angle(s / r);
+            assert!(wrap_angle(p.heading_at(s) - expected).abs() < 1e-4, "heading at {s}");
+            assert!((p.curvature_at(s) - 1.0 / r).abs() < 1e-4, "curvature at {s}");
+        }
+        // Inside the circle is on the left.
+        let pr = p.project(&Point2::new(0.0, 1.0));
+        assert!((pr.lateral_m - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn duplicates_dropped_and_errors_name_point() {
+        let p = Path::new(&[[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [2.0, 0.0]], None, false).unwrap();
+        assert_eq!(p.len_points(), 3);
+        let e = Path::new(&[[0.0, 0.0], [f64::NAN, 0.0]], None, false).unwrap_err();
+        assert!(e.to_string().contains("point 1"), "{e}");
+        let e = Path::new(&[[1.0, 1.0], [1.0, 1.0]], None, false).unwrap_err();
+        assert_eq!(e, PathError::TooFewPoints(1));
+        let e = Path::new(&[], None, false).unwrap_err();
+        assert_eq!(e, PathError::TooFewPoints(0));
+        let w = [Widths { right_m: 1.0, left_m: 1.0 }, Widths { right_m: -1.0, left_m: 1.0 }];
+        let e = Path::new(&[[0.0, 0.0], [1.0, 0.0]], Some(&w), false).unwrap_err();
+        assert!(e.to_string().contains("point 1") && e.to_string().contains("right width"), "{e}");
+    }
+
+    #[test]
+    fn tum_parse_errors_name_line() {
+        let e = Path::from_tum_str("# x_m,y_m,w_tr_right_m,w_tr_left_m\n0,0,1,1\n1,abc,1,1\n", "t.csv", true).unwrap_err();
+        assert!(e.to_string().contains("t.csv: line 3"), "{e}");
+        let e = Path::from_tum_str("# h\n0,0,1,1\n1,0,1\n", "t.csv", true).unwrap_err();
+        assert!(e.to_string().contains("line 3"), "{e}");
+        let e = Path::from_tum_str("# h\n0,0,1,1\n1,0,-1,1\n", "t.csv", true).unwrap_err();
+        assert!(e.to_string().contains("line 3") && e.to_string().contains(">= 0"), "{e}");
+        let e = Path::from_tum_str("# h\n", "t.csv", true).unwrap_err();
+        assert!(e.to_string().contains("at least 2"), "{e}");
+        let p = Path::from_tum_str("# h\n0,0,1,2\n10,0,1,2\n10,10,1,2\n", "t.csv", true).unwrap();
+        assert!(p.is_closed());
+        assert_eq!(p.widths_at(5.0).unwrap(), Widths { right_m: 1.0, left_m: 2.0 });
+    }
+
+    #[test]
+    fn test_track_is_closed_smooth_and_turns_both_ways() {
+        let p = Path::test_track(1.0).unwrap();
+        let pts = p.points();
+        // The closing segment is as long as the others (the loop really closes).
+        let closing = (pts[0] - pts[pts.len() - 1]).norm();
+        assert!((closing - 1.0).abs() < 0.05, "closing segment {closing}");
+        let mut kmin = f64::INFINITY;
+        let mut kmax = f64::NEG_INFINITY;
+        let mut s = 0.0;
+        while s < p.length() {
+            let k = p.curvature_at(s);
+            kmin = kmin.min(k);
+            kmax = kmax.max(k);
+            s += 0.5;
+        }
+        assert!(kmin < -0.02 && kmax > 0.035 && kmax < 0.045, "curvature range [{kmin}, {kmax}]");
+    }
+
+    #[test]
+    fn open_path_extrapolates() {
+        let p = Path::straight(10.0, 1.0).unwrap();
+        let q = p.point_at(12.0);
+        assert!((q.x - 12.0).abs() < 1e-12 && q.y.abs() < 1e-12);
+        let q = p.point_at(-3.0);
+        assert!((q.x + 3.0).abs() < 1e-12);
+    }
+}
