@@ -99,7 +99,7 @@ impl Default for ControllerConfig {
             reaction_time: 1.0,
             direction: Direction::Forward,
             lateral_controller: LateralKind::Blend,
-            stanley_gain: 2.5,
+            stanley_gain: 1.0,
             stanley_gain_reverse: 0.3,
             stanley_softening_mps: 1.0,
             target_distance_min_m: 2.0,

@@ -45,6 +45,13 @@
 //!   this, so reversing uses `stanley_gain_reverse` (default 0.3 < k_soft / E,
 //!   stable at every speed). The slow, weakly damped convergence that results
 //!   is the reason the paper's test #6 (backward, alpha = 1) tracks worst.
+//!   With a weak gain the heading term alone would leave a large steady offset
+//!   in curves: reversing, the front axle moves along `theta' + delta`, so on a
+//!   path of curvature `kappa` the equilibrium with the front axle ON the path
+//!   has `delta = -asin(E kappa)` and `e_t' = asin(E kappa)`, while the
+//!   flipped law gives `delta = e_t' + atan(...)`. The reverse Stanley command
+//!   therefore adds the feed-forward `-2 asin(E kappa_front)`, which makes that
+//!   equilibrium exact without changing the linearised stability.
 
 use crate::path::{wrap_angle, Path, Projection};
 use crate::vehicle::Direction;
@@ -138,7 +145,14 @@ pub fn stanley_command(front: &Projection, theta_rad: f64, speed_abs: f64, direc
         Direction::Backward => g.stanley_gain_reverse,
     };
     let law = stanley(front.lateral_m, e_theta, speed_abs, k, g.stanley_softening_mps);
-    direction.sign() * law
+    match direction {
+        Direction::Forward => law,
+        Direction::Backward => {
+            // Feed-forward that makes "front axle on the path" the equilibrium (see module docs).
+            let ff = 2.0 * (g.wheelbase_m * front.curvature_per_m).clamp(-1.0, 1.0).asin();
+            -law - ff
+        }
+    }
 }
 
 /// Curvature-based command at the rear axle for either direction.
