@@ -1,0 +1,25 @@
+//! Python binding of the blendtrack core, imported as `blendtrack._blendtrack`.
+//!
+//! This crate is thin on purpose: it converts Python inputs to core types,
+//! calls the core with the interpreter released (`py.detach`), and converts
+//! the results back (numpy arrays for anything per-vehicle or per-step). All
+//! behaviour lives in the `blendtrack` crate; the public Python API is the
+//! `blendtrack` package, which re-exports what this module registers.
+//!
+//! It is built by maturin only (`pip install -e .` or `maturin develop`); it
+//! is kept out of the workspace's default members so a bare `cargo test`
+//! stays Python-free. Every name registered here must also be declared in
+//! `python/blendtrack/_blendtrack.pyi` (checked by `mypy.stubtest`).
+
+use pyo3::prelude::*;
+
+mod errors;
+
+/// The native module. Each submodule of this crate adds its own names
+/// through a `register` function, so this stays a list of one-liners.
+#[pymodule]
+fn _blendtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    errors::register(m)?;
+    Ok(())
+}

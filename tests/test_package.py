@@ -1,0 +1,104 @@
+"""The installed package: version, exception hierarchy, command line."""
+
+from __future__ import annotations
+
+import importlib.metadata
+import pickle
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+import blendtrack
+from blendtrack import _blendtrack
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _pyproject_version() -> str:
+    with open(REPO_ROOT / "pyproject.toml", "rb") as f:
+        version: str = tomllib.load(f)["project"]["version"]
+    return version
+
+
+def _run_cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "blendtrack.cli", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        check=False,
+    )
+
+
+def test_version_of_native_module_matches_pyproject() -> None:
+    # __version__ is compiled in from Cargo.toml; a mismatch means the two
+    # manifests disagree or the extension is a stale build.
+    assert blendtrack.__version__ == _pyproject_version()
+    assert blendtrack.__version__ == importlib.metadata.version("blendtrack")
+
+
+def test_public_names_are_the_native_ones() -> None:
+    for name in blendtrack.__all__:
+        assert getattr(blendtrack, name) is getattr(_blendtrack, name), name
+
+
+@pytest.mark.parametrize(
+    "cls",
+    [blendtrack.ConfigError, blendtrack.PathError, blendtrack.SimulationError],
+)
+def test_exception_hierarchy(cls: type[Exception]) -> None:
+    assert cls.__mro__[1] is blendtrack.BlendtrackError
+    assert blendtrack.BlendtrackError.__mro__[1] is Exception
+    with pytest.raises(blendtrack.BlendtrackError, match="bad key 'x'"):
+        raise cls("bad key 'x'")
+
+
+def test_exceptions_are_siblings() -> None:
+    assert not issubclass(blendtrack.ConfigError, blendtrack.PathError)
+    assert not issubclass(blendtrack.PathError, blendtrack.SimulationError)
+    assert not issubclass(blendtrack.SimulationError, blendtrack.ConfigError)
+
+
+def test_exceptions_are_public_and_pickle() -> None:
+    err = blendtrack.PathError("row 3: NaN coordinate")
+    assert type(err).__module__ == "blendtrack"
+    assert repr(err) == "PathError('row 3: NaN coordinate')"
+    copy = pickle.loads(pickle.dumps(err))
+    assert type(copy) is blendtrack.PathError
+    assert copy.args == ("row 3: NaN coordinate",)
+
+
+def test_cli_version_prints_the_version() -> None:
+    result = _run_cli("version")
+    assert result.returncode == 0, result.stderr
+    assert result.stdout == f"{blendtrack.__version__}\n"
+    assert result.stderr == ""
+
+
+def test_cli_unknown_subcommand_is_a_one_line_error() -> None:
+    result = _run_cli("no-such-command")
+    assert result.returncode == 2
+    assert result.stdout == ""
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("blendtrack: error:")
+    assert "no-such-command" in lines[0]
+    assert "Traceback" not in result.stderr
+
+
+def test_cli_without_subcommand_is_a_one_line_error() -> None:
+    result = _run_cli()
+    assert result.returncode == 2
+    assert len(result.stderr.splitlines()) == 1, result.stderr
+
+
+def test_cli_main_returns_exit_code() -> None:
+    from blendtrack.cli import main
+
+    assert main(["version"]) == 0
+    with pytest.raises(SystemExit) as exc_info:
+        main(["--no-such-flag"])
+    assert exc_info.value.code == 2
