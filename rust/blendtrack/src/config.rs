@@ -142,7 +142,11 @@ fn negative(key: &str, v: f64) -> Result<(), ConfigError> {
     if v < 0.0 {
         Ok(())
     } else {
-        Err(ConfigError::invalid(key, v, "must be < 0 (a deceleration is negative)"))
+        Err(ConfigError::invalid(
+            key,
+            v,
+            "must be < 0 (a deceleration is negative)",
+        ))
     }
 }
 
@@ -151,12 +155,20 @@ impl ControllerConfig {
     pub fn validate(&self) -> Result<(), ConfigError> {
         finite("lat_blend_factor", self.lat_blend_factor)?;
         if !(0.0..=1.0).contains(&self.lat_blend_factor) {
-            return Err(ConfigError::invalid("lat_blend_factor", self.lat_blend_factor, "must be in [0, 1] (0 = rear axle, 1 = front axle)"));
+            return Err(ConfigError::invalid(
+                "lat_blend_factor",
+                self.lat_blend_factor,
+                "must be in [0, 1] (0 = rear axle, 1 = front axle)",
+            ));
         }
         positive("acceleration_exp", self.acceleration_exp)?;
         finite("deceleration_factor", self.deceleration_factor)?;
         if self.deceleration_factor < 1.0 {
-            return Err(ConfigError::invalid("deceleration_factor", self.deceleration_factor, "must be >= 1"));
+            return Err(ConfigError::invalid(
+                "deceleration_factor",
+                self.deceleration_factor,
+                "must be >= 1",
+            ));
         }
         negative("max_deceleration", self.max_deceleration)?;
         negative("max_obs_deceleration", self.max_obs_deceleration)?;
@@ -171,9 +183,15 @@ impl ControllerConfig {
         positive("stanley_softening_mps", self.stanley_softening_mps)?;
         positive("target_distance_min_m", self.target_distance_min_m)?;
         non_negative("target_distance_gain_s", self.target_distance_gain_s)?;
-        non_negative("curvature_lookahead_gain_s", self.curvature_lookahead_gain_s)?;
+        non_negative(
+            "curvature_lookahead_gain_s",
+            self.curvature_lookahead_gain_s,
+        )?;
         non_negative("pure_pursuit_gain_s", self.pure_pursuit_gain_s)?;
-        positive("pure_pursuit_min_lookahead_m", self.pure_pursuit_min_lookahead_m)?;
+        positive(
+            "pure_pursuit_min_lookahead_m",
+            self.pure_pursuit_min_lookahead_m,
+        )?;
         finite("border_margin_m", self.border_margin_m)?;
         positive("ray_horizon_m", self.ray_horizon_m)?;
         Ok(())
@@ -185,7 +203,11 @@ pub fn validate_vehicle(p: &VehicleParams) -> Result<(), ConfigError> {
     positive("wheelbase_m", p.wheelbase_m)?;
     positive("max_steering_deg", p.max_steering_deg)?;
     if p.max_steering_deg >= 90.0 {
-        return Err(ConfigError::invalid("max_steering_deg", p.max_steering_deg, "must be < 90"));
+        return Err(ConfigError::invalid(
+            "max_steering_deg",
+            p.max_steering_deg,
+            "must be < 90",
+        ));
     }
     positive("max_steering_rate_deg_s", p.max_steering_rate_deg_s)?;
     positive("max_acceleration_mps2", p.max_acceleration_mps2)?;
@@ -204,7 +226,9 @@ pub struct Config {
 
 impl Config {
     pub fn validate(&self) -> Result<(), ConfigError> {
-        self.controller.validate().map_err(|e| prefix(e, "controller"))?;
+        self.controller
+            .validate()
+            .map_err(|e| prefix(e, "controller"))?;
         validate_vehicle(&self.vehicle).map_err(|e| prefix(e, "vehicle"))
     }
 
@@ -224,23 +248,39 @@ impl Config {
     }
 
     pub fn save(&self, file: &std::path::Path) -> Result<(), ConfigError> {
-        std::fs::write(file, self.to_toml_string())
-            .map_err(|e| ConfigError::Io { file: file.display().to_string(), message: e.to_string() })
+        std::fs::write(file, self.to_toml_string()).map_err(|e| ConfigError::Io {
+            file: file.display().to_string(),
+            message: e.to_string(),
+        })
     }
 }
 
 fn prefix(e: ConfigError, table: &str) -> ConfigError {
     match e {
-        ConfigError::Invalid { key, value, message } => ConfigError::Invalid { key: format!("{table}.{key}"), value, message },
+        ConfigError::Invalid {
+            key,
+            value,
+            message,
+        } => ConfigError::Invalid {
+            key: format!("{table}.{key}"),
+            value,
+            message,
+        },
         other => other,
     }
 }
 
 fn read(file: &std::path::Path) -> Result<String, ConfigError> {
-    std::fs::read_to_string(file).map_err(|e| ConfigError::Io { file: file.display().to_string(), message: e.to_string() })
+    std::fs::read_to_string(file).map_err(|e| ConfigError::Io {
+        file: file.display().to_string(),
+        message: e.to_string(),
+    })
 }
 
-fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, source_name: &str) -> Result<T, ConfigError> {
+fn parse_toml<T: serde::de::DeserializeOwned>(
+    text: &str,
+    source_name: &str,
+) -> Result<T, ConfigError> {
     toml::from_str(text).map_err(|e| ConfigError::Parse {
         source_name: source_name.to_string(),
         message: e.to_string().trim_end().replace('\n', " | "),
@@ -276,7 +316,9 @@ impl ExperimentSet {
         let set: ExperimentSet = parse_toml(text, source_name)?;
         validate_vehicle(&set.vehicle).map_err(|e| prefix(e, "vehicle"))?;
         for t in &set.tests {
-            t.controller.validate().map_err(|e| prefix(e, &format!("test[{}].controller", t.name)))?;
+            t.controller
+                .validate()
+                .map_err(|e| prefix(e, &format!("test[{}].controller", t.name)))?;
         }
         Ok(set)
     }
@@ -293,16 +335,32 @@ mod tests {
     fn defaults_are_the_paper_table() {
         let c = ControllerConfig::default();
         assert_eq!(
-            (c.lat_blend_factor, c.acceleration_exp, c.deceleration_factor, c.max_deceleration, c.max_obs_deceleration),
+            (
+                c.lat_blend_factor,
+                c.acceleration_exp,
+                c.deceleration_factor,
+                c.max_deceleration,
+                c.max_obs_deceleration
+            ),
             (0.5, 3.0, 2.0, -4.0, -8.0)
         );
         assert_eq!(
-            (c.path_width_m, c.preferred_acceleration, c.preferred_deceleration, c.preferred_speed, c.preferred_stop_dist, c.reaction_time),
+            (
+                c.path_width_m,
+                c.preferred_acceleration,
+                c.preferred_deceleration,
+                c.preferred_speed,
+                c.preferred_stop_dist,
+                c.reaction_time
+            ),
             (12.0, 1.0, -1.0, 3.0, 0.0, 1.0)
         );
         c.validate().unwrap();
         let v = VehicleParams::default();
-        assert_eq!((v.wheelbase_m, v.max_steering_deg, v.max_steering_rate_deg_s), (2.6, 40.0, 30.0));
+        assert_eq!(
+            (v.wheelbase_m, v.max_steering_deg, v.max_steering_rate_deg_s),
+            (2.6, 40.0, 30.0)
+        );
     }
 
     #[test]
@@ -318,43 +376,77 @@ mod tests {
 
     #[test]
     fn errors_name_the_key() {
-        let e = Config::from_toml_str("[controller]\nlat_blend_factr = 0.3\n", "f.toml").unwrap_err();
-        assert!(e.to_string().contains("lat_blend_factr") && e.to_string().contains("f.toml"), "{e}");
-        let e = Config::from_toml_str("[controller]\nlat_blend_factor = 1.5\n", "f.toml").unwrap_err();
+        let e =
+            Config::from_toml_str("[controller]\nlat_blend_factr = 0.3\n", "f.toml").unwrap_err();
+        assert!(
+            e.to_string().contains("lat_blend_factr") && e.to_string().contains("f.toml"),
+            "{e}"
+        );
+        let e =
+            Config::from_toml_str("[controller]\nlat_blend_factor = 1.5\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("controller.lat_blend_factor"), "{e}");
         let e = Config::from_toml_str("[vehicle]\nwheelbase_m = 0.0\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("vehicle.wheelbase_m"), "{e}");
-        let e = Config::from_toml_str("[controller]\nmax_deceleration = 4.0\n", "f.toml").unwrap_err();
+        let e =
+            Config::from_toml_str("[controller]\nmax_deceleration = 4.0\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("controller.max_deceleration"), "{e}");
         let e = Config::from_toml_str("[controller]\nreaction_time = nan\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("controller.reaction_time"), "{e}");
         let e = Config::from_toml_str("[controler]\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("controler"), "{e}");
-        let e = Config::from_toml_str("[controller]\ndirection = \"sideways\"\n", "f.toml").unwrap_err();
+        let e = Config::from_toml_str("[controller]\ndirection = \"sideways\"\n", "f.toml")
+            .unwrap_err();
         assert!(e.to_string().contains("sideways"), "{e}");
     }
 
     #[test]
     fn paper_real_tests_file_matches_table() {
-        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../configs/paper_real_tests.toml");
+        let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../configs/paper_real_tests.toml");
         let set = ExperimentSet::load(&file).unwrap();
         assert_eq!(set.tests.len(), 6);
-        let alphas: Vec<f64> = set.tests.iter().map(|t| t.controller.lat_blend_factor).collect();
+        let alphas: Vec<f64> = set
+            .tests
+            .iter()
+            .map(|t| t.controller.lat_blend_factor)
+            .collect();
         assert_eq!(alphas, vec![0.0, 0.5, 1.0, 0.0, 0.5, 1.0]);
-        let speeds: Vec<f64> = set.tests.iter().map(|t| t.controller.preferred_speed).collect();
+        let speeds: Vec<f64> = set
+            .tests
+            .iter()
+            .map(|t| t.controller.preferred_speed)
+            .collect();
         assert_eq!(speeds, vec![3.0, 3.0, 3.0, 1.0, 1.0, 1.0]);
         let dirs: Vec<Direction> = set.tests.iter().map(|t| t.controller.direction).collect();
         assert_eq!(dirs[..3], [Direction::Forward; 3]);
         assert_eq!(dirs[3..], [Direction::Backward; 3]);
-        let paper: Vec<f64> = set.tests.iter().map(|t| t.paper_average_distance_m.unwrap()).collect();
+        let paper: Vec<f64> = set
+            .tests
+            .iter()
+            .map(|t| t.paper_average_distance_m.unwrap())
+            .collect();
         assert_eq!(paper, vec![0.043, 0.042, 0.026, 0.050, 0.049, 0.260]);
         for t in &set.tests {
             let c = &t.controller;
             assert_eq!(
-                (c.acceleration_exp, c.deceleration_factor, c.max_deceleration, c.max_obs_deceleration, c.path_width_m),
+                (
+                    c.acceleration_exp,
+                    c.deceleration_factor,
+                    c.max_deceleration,
+                    c.max_obs_deceleration,
+                    c.path_width_m
+                ),
                 (3.0, 2.0, -4.0, -8.0, 12.0)
             );
-            assert_eq!((c.preferred_acceleration, c.preferred_deceleration, c.preferred_stop_dist, c.reaction_time), (1.0, -1.0, 0.0, 1.0));
+            assert_eq!(
+                (
+                    c.preferred_acceleration,
+                    c.preferred_deceleration,
+                    c.preferred_stop_dist,
+                    c.reaction_time
+                ),
+                (1.0, -1.0, 0.0, 1.0)
+            );
         }
     }
 }

@@ -9,7 +9,9 @@
 
 use crate::config::{validate_vehicle, ControllerConfig, LateralKind};
 use crate::error::{ConfigError, StateError};
-use crate::lateral::{blend, pure_pursuit_command, rear_command, stanley_command, travel_heading, LateralGains};
+use crate::lateral::{
+    blend, pure_pursuit_command, rear_command, stanley_command, travel_heading, LateralGains,
+};
 use crate::longitudinal::{longitudinal_accel, Corridor, Obstacle};
 use crate::path::{wrap_angle, Path};
 use crate::vehicle::{VehicleParams, VehicleState};
@@ -69,7 +71,11 @@ pub struct Controller {
 
 impl Controller {
     /// Validates the configuration and vehicle; errors name the key.
-    pub fn new(track: Arc<Track>, cfg: ControllerConfig, vehicle: &VehicleParams) -> Result<Self, ConfigError> {
+    pub fn new(
+        track: Arc<Track>,
+        cfg: ControllerConfig,
+        vehicle: &VehicleParams,
+    ) -> Result<Self, ConfigError> {
         cfg.validate()?;
         validate_vehicle(vehicle)?;
         let gains = LateralGains {
@@ -83,7 +89,15 @@ impl Controller {
             pure_pursuit_gain_s: cfg.pure_pursuit_gain_s,
             pure_pursuit_min_lookahead_m: cfg.pure_pursuit_min_lookahead_m,
         };
-        Ok(Controller { track, cfg, gains, max_steering_rad: vehicle.max_steering_rad(), hint_rear: None, hint_front: None, hint_cp: None })
+        Ok(Controller {
+            track,
+            cfg,
+            gains,
+            max_steering_rad: vehicle.max_steering_rad(),
+            hint_rear: None,
+            hint_front: None,
+            hint_cp: None,
+        })
     }
 
     pub fn config(&self) -> &ControllerConfig {
@@ -100,18 +114,44 @@ impl Controller {
         self.hint_cp = None;
     }
 
+    /// Front-axle projection; its curvature is only used (by the reverse
+    /// Stanley feed-forward) when driving backwards.
+    fn project_front(&mut self, front_pt: &Point2<f64>) -> crate::path::Projection {
+        let path = &self.track.path;
+        let mut front = path.project_with_no_curvature(front_pt, self.hint_front);
+        if self.cfg.direction == crate::vehicle::Direction::Backward {
+            front.curvature_per_m = path.curvature_at(front.s);
+        }
+        self.hint_front = Some(front.s);
+        front
+    }
+
     /// One step with the configured blend factor.
-    pub fn step(&mut self, measured: &VehicleState, obstacles: &[Obstacle]) -> Result<ControlOutput, StateError> {
+    pub fn step(
+        &mut self,
+        measured: &VehicleState,
+        obstacles: &[Obstacle],
+    ) -> Result<ControlOutput, StateError> {
         self.step_with_alpha(measured, self.cfg.lat_blend_factor, obstacles)
     }
 
     /// One step with blend factor `alpha` (in [0, 1]; it may change every step).
-    pub fn step_with_alpha(&mut self, measured: &VehicleState, alpha: f64, obstacles: &[Obstacle]) -> Result<ControlOutput, StateError> {
+    pub fn step_with_alpha(
+        &mut self,
+        measured: &VehicleState,
+        alpha: f64,
+        obstacles: &[Obstacle],
+    ) -> Result<ControlOutput, StateError> {
         measured.check_finite()?;
         if !(0.0..=1.0).contains(&alpha) {
-            return Err(StateError::Parameter { name: "alpha", value: alpha, message: "must be in [0, 1]" });
+            return Err(StateError::Parameter {
+                name: "alpha",
+                value: alpha,
+                message: "must be in [0, 1]",
+            });
         }
-        let path = &self.track.path;
+        let track = self.track.clone();
+        let path = &track.path;
         let e = self.gains.wheelbase_m;
         let dir = self.cfg.direction;
         let speed = measured.v_mps.abs();
@@ -119,24 +159,30 @@ impl Controller {
         let h = measured.heading_vec();
         let front_pt: Point2<f64> = rear_pt + h * e;
 
-        let rear = path.project_with(&rear_pt, self.hint_rear);
+        let rear = path.project_with_no_curvature(&rear_pt, self.hint_rear);
         self.hint_rear = Some(rear.s);
         let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
             LateralKind::Blend => {
-                let front = path.project_with(&front_pt, self.hint_front);
-                self.hint_front = Some(front.s);
+                let front = self.project_front(&front_pt);
                 let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
                 let dr = rear_command(path, &rear, measured.theta_rad, speed, dir, &self.gains);
                 (alpha, df, dr)
             }
             LateralKind::Stanley => {
-                let front = path.project_with(&front_pt, self.hint_front);
-                self.hint_front = Some(front.s);
+                let front = self.project_front(&front_pt);
                 let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
                 (1.0, df, f64::NAN)
             }
             LateralKind::PurePursuit => {
-                let dr = pure_pursuit_command(path, (rear_pt.x, rear_pt.y), &rear, measured.theta_rad, speed, dir, &self.gains);
+                let dr = pure_pursuit_command(
+                    path,
+                    (rear_pt.x, rear_pt.y),
+                    &rear,
+                    measured.theta_rad,
+                    speed,
+                    dir,
+                    &self.gains,
+                );
                 (0.0, f64::NAN, dr)
             }
         };
@@ -152,7 +198,10 @@ impl Controller {
         self.hint_cp = Some(cp.s);
         let th_travel = travel_heading(measured.theta_rad, dir);
 
-        let d_obs = self.track.corridor.ray_cast(path, &rear_pt, th_travel, rear.s, self.cfg.ray_horizon_m);
+        let d_obs =
+            self.track
+                .corridor
+                .ray_cast(path, &rear_pt, th_travel, rear.s, self.cfg.ray_horizon_m);
         let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
         Ok(ControlOutput {
             steering_rad: steering,

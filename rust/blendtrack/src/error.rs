@@ -14,22 +14,38 @@ pub enum PathError {
     TooFewPoints(usize),
     /// A coordinate or width is NaN or infinite.
     #[error("{location}: {what} is not finite ({value})")]
-    NonFinite { location: String, what: &'static str, value: f64 },
+    NonFinite {
+        location: String,
+        what: &'static str,
+        value: f64,
+    },
     /// A width is negative.
     #[error("{location}: {what} must be >= 0, got {value}")]
-    NegativeWidth { location: String, what: &'static str, value: f64 },
+    NegativeWidth {
+        location: String,
+        what: &'static str,
+        value: f64,
+    },
     /// Widths were given but not one pair per point.
     #[error("got {widths} width pairs for {points} points")]
     WidthCount { widths: usize, points: usize },
     /// A track file line could not be parsed.
     #[error("{file}: line {line}: {message}")]
-    Parse { file: String, line: u64, message: String },
+    Parse {
+        file: String,
+        line: u64,
+        message: String,
+    },
     /// A track file could not be read.
     #[error("cannot read track file {file}: {message}")]
     Io { file: String, message: String },
     /// A generator parameter is out of range.
     #[error("invalid path parameter {name} = {value}: {message}")]
-    Parameter { name: &'static str, value: f64, message: &'static str },
+    Parameter {
+        name: &'static str,
+        value: f64,
+        message: &'static str,
+    },
 }
 
 /// A configuration value is missing, unknown, out of range or unreadable.
@@ -37,18 +53,33 @@ pub enum PathError {
 pub enum ConfigError {
     /// A value is out of its admissible range; `key` is the TOML key.
     #[error("config key `{key}` = {value}: {message}")]
-    Invalid { key: String, value: String, message: String },
+    Invalid {
+        key: String,
+        value: String,
+        message: String,
+    },
     /// The TOML text is malformed or has an unknown key (the message names it).
     #[error("{source_name}: {message}")]
-    Parse { source_name: String, message: String },
+    Parse {
+        source_name: String,
+        message: String,
+    },
     /// The file could not be read or written.
     #[error("cannot access config file {file}: {message}")]
     Io { file: String, message: String },
 }
 
 impl ConfigError {
-    pub(crate) fn invalid(key: impl Into<String>, value: impl ToString, message: impl Into<String>) -> Self {
-        ConfigError::Invalid { key: key.into(), value: value.to_string(), message: message.into() }
+    pub(crate) fn invalid(
+        key: impl Into<String>,
+        value: impl ToString,
+        message: impl Into<String>,
+    ) -> Self {
+        ConfigError::Invalid {
+            key: key.into(),
+            value: value.to_string(),
+            message: message.into(),
+        }
     }
 }
 
@@ -58,7 +89,11 @@ pub enum StateError {
     #[error("vehicle state field `{field}` is not finite ({value})")]
     NonFinite { field: &'static str, value: f64 },
     #[error("simulation parameter `{name}` = {value}: {message}")]
-    Parameter { name: &'static str, value: f64, message: &'static str },
+    Parameter {
+        name: &'static str,
+        value: f64,
+        message: &'static str,
+    },
 }
 
 /// Any error of the core crate.

@@ -59,7 +59,13 @@ use serde::{Deserialize, Serialize};
 
 /// Stanley's law at the front axle: `-e_theta - atan(k e / (k_soft + |v|))`.
 #[inline]
-pub fn stanley(e_front_m: f64, e_theta_front_rad: f64, speed_abs_mps: f64, gain: f64, softening_mps: f64) -> f64 {
+pub fn stanley(
+    e_front_m: f64,
+    e_theta_front_rad: f64,
+    speed_abs_mps: f64,
+    gain: f64,
+    softening_mps: f64,
+) -> f64 {
     -e_theta_front_rad - (gain * e_front_m / (softening_mps + speed_abs_mps)).atan()
 }
 
@@ -84,13 +90,19 @@ pub fn rear_first_term(wheelbase_m: f64, e_m: f64, e_theta_rad: f64, d_m: f64) -
 
 /// First term of the rear law exactly as printed in the paper (eq. 5), mapped
 /// to our conventions; defined only for `e != 0`.
-pub fn rear_first_term_printed(wheelbase_m: f64, e_m: f64, e_theta_rad: f64, d_m: f64) -> Option<f64> {
+pub fn rear_first_term_printed(
+    wheelbase_m: f64,
+    e_m: f64,
+    e_theta_rad: f64,
+    d_m: f64,
+) -> Option<f64> {
     if e_m == 0.0 {
         return None;
     }
     let s = e_m.signum();
     let e_d = e_m.abs();
-    let arg = 2.0 * wheelbase_m * (s * e_theta_rad - (d_m / e_d).atan()).cos() / (e_d * e_d + d_m * d_m).sqrt();
+    let arg = 2.0 * wheelbase_m * (s * e_theta_rad - (d_m / e_d).atan()).cos()
+        / (e_d * e_d + d_m * d_m).sqrt();
     Some(-s * arg.atan())
 }
 
@@ -119,7 +131,8 @@ pub struct LateralGains {
 impl LateralGains {
     /// Target distance `d` of the rear law.
     pub fn target_distance(&self, speed_abs: f64) -> f64 {
-        self.target_distance_min_m.max(self.target_distance_gain_s * speed_abs)
+        self.target_distance_min_m
+            .max(self.target_distance_gain_s * speed_abs)
     }
     /// Curvature look-ahead `L` of the rear law.
     pub fn curvature_lookahead(&self, speed_abs: f64) -> f64 {
@@ -137,32 +150,55 @@ pub fn travel_heading(theta_rad: f64, direction: Direction) -> f64 {
 }
 
 /// Stanley command at the front axle for either direction.
-pub fn stanley_command(front: &Projection, theta_rad: f64, speed_abs: f64, direction: Direction, g: &LateralGains) -> f64 {
+pub fn stanley_command(
+    front: &Projection,
+    theta_rad: f64,
+    speed_abs: f64,
+    direction: Direction,
+    g: &LateralGains,
+) -> f64 {
     let th = travel_heading(theta_rad, direction);
     let e_theta = wrap_angle(th - front.heading_rad);
     let k = match direction {
         Direction::Forward => g.stanley_gain,
         Direction::Backward => g.stanley_gain_reverse,
     };
-    let law = stanley(front.lateral_m, e_theta, speed_abs, k, g.stanley_softening_mps);
+    let law = stanley(
+        front.lateral_m,
+        e_theta,
+        speed_abs,
+        k,
+        g.stanley_softening_mps,
+    );
     match direction {
         Direction::Forward => law,
         Direction::Backward => {
             // Feed-forward that makes "front axle on the path" the equilibrium (see module docs).
-            let ff = 2.0 * (g.wheelbase_m * front.curvature_per_m).clamp(-1.0, 1.0).asin();
+            let ff = 2.0
+                * (g.wheelbase_m * front.curvature_per_m)
+                    .clamp(-1.0, 1.0)
+                    .asin();
             -law - ff
         }
     }
 }
 
 /// Curvature-based command at the rear axle for either direction.
-pub fn rear_command(path: &Path, rear: &Projection, theta_rad: f64, speed_abs: f64, direction: Direction, g: &LateralGains) -> f64 {
+pub fn rear_command(
+    path: &Path,
+    rear: &Projection,
+    theta_rad: f64,
+    speed_abs: f64,
+    direction: Direction,
+    g: &LateralGains,
+) -> f64 {
     let th = travel_heading(theta_rad, direction);
     let e_theta = wrap_angle(th - rear.heading_rad);
     let d = g.target_distance(speed_abs);
     let l = g.curvature_lookahead(speed_abs);
     let dtheta = wrap_angle(path.heading_at(rear.s + l) - th);
-    let law = rear_first_term(g.wheelbase_m, rear.lateral_m, e_theta, d) + rear_second_term(g.wheelbase_m, dtheta, l);
+    let law = rear_first_term(g.wheelbase_m, rear.lateral_m, e_theta, d)
+        + rear_second_term(g.wheelbase_m, dtheta, l);
     direction.sign() * law
 }
 
@@ -195,12 +231,18 @@ pub fn blend(alpha: f64, delta_front: f64, delta_rear: f64) -> f64 {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum AlphaSchedule {
-    Constant { alpha: f64 },
+    Constant {
+        alpha: f64,
+    },
     /// The paper's moving point: `0.5 (sin(omega t) + 1)`.
-    Sine { omega_rad_s: f64 },
+    Sine {
+        omega_rad_s: f64,
+    },
     /// Piecewise linear through `(t, alpha)` knots sorted by time; held
     /// constant before the first and after the last knot.
-    Piecewise { knots: Vec<(f64, f64)> },
+    Piecewise {
+        knots: Vec<(f64, f64)>,
+    },
 }
 
 impl AlphaSchedule {
@@ -250,7 +292,9 @@ impl AlphaSchedule {
                 }
                 for (i, (t, a)) in knots.iter().enumerate() {
                     if !t.is_finite() || !(0.0..=1.0).contains(a) {
-                        return Err(format!("knot {i} = ({t}, {a}): t must be finite and alpha in [0, 1]"));
+                        return Err(format!(
+                            "knot {i} = ({t}, {a}): t must be finite and alpha in [0, 1]"
+                        ));
                     }
                     if i > 0 && *t <= knots[i - 1].0 {
                         return Err(format!("knot {i}: times must increase strictly"));
@@ -301,7 +345,10 @@ mod tests {
 
     #[test]
     fn first_term_steers_back_toward_the_path() {
-        assert!(rear_first_term(2.6, 1.0, 0.0, 3.0) < 0.0, "left of the path: steer right");
+        assert!(
+            rear_first_term(2.6, 1.0, 0.0, 3.0) < 0.0,
+            "left of the path: steer right"
+        );
         assert!(rear_first_term(2.6, -1.0, 0.0, 3.0) > 0.0);
         assert!(stanley(1.0, 0.0, 3.0, 2.5, 1.0) < 0.0);
         assert!(stanley(0.0, 0.2, 3.0, 2.5, 1.0) < 0.0);
@@ -327,7 +374,10 @@ mod tests {
                     let pr = path.project(&p);
                     let d = rear_command(&path, &pr, th, v, Direction::Forward, &g);
                     let expected = (2.6 / r).atan();
-                    assert!((d - expected).abs() < 1e-3, "R={r} v={v} s={s}: {d} vs {expected}");
+                    assert!(
+                        (d - expected).abs() < 1e-3,
+                        "R={r} v={v} s={s}: {d} vs {expected}"
+                    );
                     // Backwards along the same path (heading flipped): the
                     // steering that keeps the rear axle on the circle is the negative.
                     let db = rear_command(&path, &pr, th + PI, v, Direction::Backward, &g);
@@ -342,15 +392,24 @@ mod tests {
         let s = AlphaSchedule::Sine { omega_rad_s: 0.2 };
         assert!((s.alpha_at(0.0) - 0.5).abs() < 1e-12);
         assert!((s.alpha_at(PI / 0.4) - 1.0).abs() < 1e-12);
-        let p = AlphaSchedule::Piecewise { knots: vec![(0.0, 0.0), (10.0, 1.0), (20.0, 0.5)] };
+        let p = AlphaSchedule::Piecewise {
+            knots: vec![(0.0, 0.0), (10.0, 1.0), (20.0, 0.5)],
+        };
         assert_eq!(p.alpha_at(-1.0), 0.0);
         assert!((p.alpha_at(5.0) - 0.5).abs() < 1e-12);
         assert!((p.alpha_at(15.0) - 0.75).abs() < 1e-12);
         assert_eq!(p.alpha_at(99.0), 0.5);
         assert!(p.validate().is_ok());
-        assert!(AlphaSchedule::Piecewise { knots: vec![(1.0, 0.0), (1.0, 1.0)] }.validate().is_err());
+        assert!(AlphaSchedule::Piecewise {
+            knots: vec![(1.0, 0.0), (1.0, 1.0)]
+        }
+        .validate()
+        .is_err());
         assert!(AlphaSchedule::Constant { alpha: 1.2 }.validate().is_err());
-        assert_eq!(AlphaSchedule::Constant { alpha: f64::NAN }.alpha_at(0.0), 0.5);
+        assert_eq!(
+            AlphaSchedule::Constant { alpha: f64::NAN }.alpha_at(0.0),
+            0.5
+        );
     }
 
     #[test]

@@ -31,6 +31,17 @@ use std::f64::consts::PI;
 /// Wraps an angle to (-pi, pi].
 #[inline]
 pub fn wrap_angle(a: f64) -> f64 {
+    // Fast path for the common case (a sum or difference of wrapped angles):
+    // no fmod, which costs more than the rest of a projection.
+    if a > -PI && a <= PI {
+        return a;
+    }
+    if a > -3.0 * PI && a <= 3.0 * PI {
+        let r = if a > PI { a - 2.0 * PI } else { a + 2.0 * PI };
+        if r > -PI && r <= PI {
+            return r;
+        }
+    }
     let mut r = a % (2.0 * PI);
     if r <= -PI {
         r += 2.0 * PI;
@@ -93,7 +104,11 @@ impl Path {
     /// Builds a path from points (and optional widths). Consecutive duplicate
     /// points are dropped (for a closed path, also a last point equal to the
     /// first). Errors name the offending point by its index in the input.
-    pub fn new(points: &[[f64; 2]], widths: Option<&[Widths]>, closed: bool) -> Result<Self, PathError> {
+    pub fn new(
+        points: &[[f64; 2]],
+        widths: Option<&[Widths]>,
+        closed: bool,
+    ) -> Result<Self, PathError> {
         Self::with_locations(points, widths, closed, |i| format!("point {i}"))
     }
 
@@ -105,22 +120,37 @@ impl Path {
     ) -> Result<Self, PathError> {
         if let Some(w) = widths {
             if w.len() != points.len() {
-                return Err(PathError::WidthCount { widths: w.len(), points: points.len() });
+                return Err(PathError::WidthCount {
+                    widths: w.len(),
+                    points: points.len(),
+                });
             }
         }
         for (i, p) in points.iter().enumerate() {
             for (what, v) in [("x", p[0]), ("y", p[1])] {
                 if !v.is_finite() {
-                    return Err(PathError::NonFinite { location: location(i), what, value: v });
+                    return Err(PathError::NonFinite {
+                        location: location(i),
+                        what,
+                        value: v,
+                    });
                 }
             }
             if let Some(w) = widths {
                 for (what, v) in [("right width", w[i].right_m), ("left width", w[i].left_m)] {
                     if !v.is_finite() {
-                        return Err(PathError::NonFinite { location: location(i), what, value: v });
+                        return Err(PathError::NonFinite {
+                            location: location(i),
+                            what,
+                            value: v,
+                        });
                     }
                     if v < 0.0 {
-                        return Err(PathError::NegativeWidth { location: location(i), what, value: v });
+                        return Err(PathError::NegativeWidth {
+                            location: location(i),
+                            what,
+                            value: v,
+                        });
                     }
                 }
             }
@@ -223,8 +253,10 @@ impl Path {
     /// accepted too. Errors name the file and line.
     pub fn from_tum_csv(file: &std::path::Path, closed: bool) -> Result<Self, PathError> {
         let name = file.display().to_string();
-        let text = std::fs::read_to_string(file)
-            .map_err(|e| PathError::Io { file: name.clone(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(file).map_err(|e| PathError::Io {
+            file: name.clone(),
+            message: e.to_string(),
+        })?;
         Self::from_tum_str(&text, &name, closed)
     }
 
@@ -250,30 +282,53 @@ impl Path {
             if rec.iter().all(|f| f.is_empty()) {
                 continue;
             }
-            let perr = |message: String| PathError::Parse { file: source_name.to_string(), line, message };
+            let perr = |message: String| PathError::Parse {
+                file: source_name.to_string(),
+                line,
+                message,
+            };
             let vals: Vec<f64> = rec
                 .iter()
                 .enumerate()
-                .map(|(c, f)| f.parse::<f64>().map_err(|_| perr(format!("column {} is not a number: {f:?}", c + 1))))
+                .map(|(c, f)| {
+                    f.parse::<f64>()
+                        .map_err(|_| perr(format!("column {} is not a number: {f:?}", c + 1)))
+                })
                 .collect::<Result<_, _>>()?;
             if vals.len() != 2 && vals.len() != 4 {
-                return Err(perr(format!("expected 2 or 4 columns (x_m,y_m[,w_tr_right_m,w_tr_left_m]), got {}", vals.len())));
+                return Err(perr(format!(
+                    "expected 2 or 4 columns (x_m,y_m[,w_tr_right_m,w_tr_left_m]), got {}",
+                    vals.len()
+                )));
             }
             match ncols {
                 None => ncols = Some(vals.len()),
                 Some(c) if c != vals.len() => {
-                    return Err(perr(format!("expected {c} columns like the first data line, got {}", vals.len())))
+                    return Err(perr(format!(
+                        "expected {c} columns like the first data line, got {}",
+                        vals.len()
+                    )))
                 }
                 _ => {}
             }
             points.push([vals[0], vals[1]]);
             if vals.len() == 4 {
-                widths.push(Widths { right_m: vals[2], left_m: vals[3] });
+                widths.push(Widths {
+                    right_m: vals[2],
+                    left_m: vals[3],
+                });
             }
             lines.push(line);
         }
-        let w = if widths.is_empty() { None } else { Some(widths.as_slice()) };
-        Self::with_locations(&points, w, closed, |i| format!("{source_name}: line {}", lines[i])).map_err(|e| match e {
+        let w = if widths.is_empty() {
+            None
+        } else {
+            Some(widths.as_slice())
+        };
+        Self::with_locations(&points, w, closed, |i| {
+            format!("{source_name}: line {}", lines[i])
+        })
+        .map_err(|e| match e {
             PathError::TooFewPoints(n) => PathError::Parse {
                 file: source_name.to_string(),
                 line: lines.last().copied().unwrap_or(0),
@@ -288,7 +343,9 @@ impl Path {
         check_positive("length_m", length_m)?;
         check_positive("spacing_m", spacing_m)?;
         let n = (length_m / spacing_m).ceil().max(1.0) as usize;
-        let pts: Vec<[f64; 2]> = (0..=n).map(|i| [length_m * i as f64 / n as f64, 0.0]).collect();
+        let pts: Vec<[f64; 2]> = (0..=n)
+            .map(|i| [length_m * i as f64 / n as f64, 0.0])
+            .collect();
         Self::new(&pts, None, false)
     }
 
@@ -361,7 +418,7 @@ impl Path {
         for i in 0..n_half {
             for j in 0..sub {
                 let s0 = i as f64 * ds + j as f64 * h;
-                let th_mid = th + 0.5 * h * curvature(s0 + 0.25 * h) ;
+                let th_mid = th + 0.5 * h * curvature(s0 + 0.25 * h);
                 x += h * th_mid.cos();
                 y += h * th_mid.sin();
                 th += h * curvature(s0 + 0.5 * h);
@@ -380,11 +437,19 @@ impl Path {
     /// A copy with every coordinate and width multiplied by `factor` (> 0).
     pub fn scaled(&self, factor: f64) -> Result<Self, PathError> {
         check_positive("scale", factor)?;
-        let pts: Vec<[f64; 2]> = self.points.iter().map(|p| [p.x * factor, p.y * factor]).collect();
-        let ws: Option<Vec<Widths>> = self
-            .widths
-            .as_ref()
-            .map(|w| w.iter().map(|w| Widths { right_m: w.right_m * factor, left_m: w.left_m * factor }).collect());
+        let pts: Vec<[f64; 2]> = self
+            .points
+            .iter()
+            .map(|p| [p.x * factor, p.y * factor])
+            .collect();
+        let ws: Option<Vec<Widths>> = self.widths.as_ref().map(|w| {
+            w.iter()
+                .map(|w| Widths {
+                    right_m: w.right_m * factor,
+                    left_m: w.left_m * factor,
+                })
+                .collect()
+        });
         let mut p = Self::new(&pts, ws.as_deref(), self.closed)?;
         p.tangent_sampling_width_m = self.tangent_sampling_width_m;
         p.window_back_m = self.window_back_m;
@@ -438,8 +503,18 @@ impl Path {
     #[inline]
     pub fn wrap_s(&self, s: f64) -> f64 {
         if self.closed {
-            let r = s.rem_euclid(self.length);
-            if r >= self.length {
+            let l = self.length;
+            if (0.0..l).contains(&s) {
+                return s;
+            }
+            let r = if (-l..0.0).contains(&s) {
+                s + l
+            } else if (l..2.0 * l).contains(&s) {
+                s - l
+            } else {
+                s.rem_euclid(l)
+            };
+            if r >= l || r < 0.0 {
                 0.0
             } else {
                 r
@@ -455,8 +530,12 @@ impl Path {
         let d = to - from;
         if self.closed {
             let l = self.length;
-            let r = d.rem_euclid(l);
-            if r > 0.5 * l {
+            let h = 0.5 * l;
+            if d > -h && d <= h {
+                return d;
+            }
+            let r = self.wrap_s(d);
+            if r > h {
                 r - l
             } else {
                 r
@@ -541,7 +620,10 @@ impl Path {
         let u = (off / self.seg_len[k]).clamp(0.0, 1.0);
         let a = w[k];
         let b = w[(k + 1) % w.len()];
-        Some(Widths { right_m: a.right_m + u * (b.right_m - a.right_m), left_m: a.left_m + u * (b.left_m - a.left_m) })
+        Some(Widths {
+            right_m: a.right_m + u * (b.right_m - a.right_m),
+            left_m: a.left_m + u * (b.left_m - a.left_m),
+        })
     }
 
     /// Squared distance from `p` to segment `k`, and the offset of the foot along it.
@@ -555,6 +637,13 @@ impl Path {
     }
 
     fn make_projection(&self, p: &Point2<f64>, k: usize, t: f64, dist2: f64) -> Projection {
+        let mut pr = self.make_projection_flat(p, k, t, dist2);
+        pr.curvature_per_m = self.curvature_at(pr.s);
+        pr
+    }
+
+    /// A projection without the curvature (left at NaN), for callers that do not need it.
+    fn make_projection_flat(&self, p: &Point2<f64>, k: usize, t: f64, dist2: f64) -> Projection {
         let foot = self.points[k] + self.seg_dir[k] * t;
         let heading = self.seg_heading(k, t);
         let rel = p - foot;
@@ -565,14 +654,34 @@ impl Path {
             Vector2::new(heading.cos(), heading.sin())
         };
         let c = cross(&side_dir, &rel);
-        let lateral = if c >= 0.0 { dist2.sqrt() } else { -dist2.sqrt() };
+        let lateral = if c >= 0.0 {
+            dist2.sqrt()
+        } else {
+            -dist2.sqrt()
+        };
         let s = self.s[k] + t;
-        let s = if self.closed && s >= self.length { s - self.length } else { s };
-        Projection { s, foot, heading_rad: heading, lateral_m: lateral, curvature_per_m: self.curvature_at(s), segment: k }
+        let s = if self.closed && s >= self.length {
+            s - self.length
+        } else {
+            s
+        };
+        Projection {
+            s,
+            foot,
+            heading_rad: heading,
+            lateral_m: lateral,
+            curvature_per_m: f64::NAN,
+            segment: k,
+        }
     }
 
     /// Full projection (no hint): the globally nearest point of the polyline.
     pub fn project(&self, p: &Point2<f64>) -> Projection {
+        let (d2, k, t) = self.nearest_full(p);
+        self.make_projection(p, k, t, d2)
+    }
+
+    fn nearest_full(&self, p: &Point2<f64>) -> (f64, usize, f64) {
         let n_seg = self.seg_len.len();
         let mut order: Vec<(f64, usize)> = self
             .chunk_boxes
@@ -597,7 +706,7 @@ impl Path {
                 }
             }
         }
-        self.make_projection(p, best.1, best.2, best.0)
+        best
     }
 
     /// Brute-force projection over every segment (reference for tests).
@@ -615,13 +724,33 @@ impl Path {
     /// Windowed projection around the hint `hint_s` (see module docs). A
     /// non-finite hint falls back to the full search.
     pub fn project_hinted(&self, p: &Point2<f64>, hint_s: f64) -> Projection {
+        let (d2, k, t) = self.nearest_hinted(p, hint_s);
+        self.make_projection(p, k, t, d2)
+    }
+
+    /// [`Self::project_with`] without the curvature (`curvature_per_m` is NaN):
+    /// the controller's fast path for the points whose curvature it does not use.
+    pub fn project_with_no_curvature(&self, p: &Point2<f64>, hint_s: Option<f64>) -> Projection {
+        let (d2, k, t) = match hint_s {
+            Some(h) => self.nearest_hinted(p, h),
+            None => self.nearest_full(p),
+        };
+        self.make_projection_flat(p, k, t, d2)
+    }
+
+    /// (squared distance, segment, offset) of the hinted nearest point.
+    fn nearest_hinted(&self, p: &Point2<f64>, hint_s: f64) -> (f64, usize, f64) {
         if !hint_s.is_finite() {
-            return self.project(p);
+            return self.nearest_full(p);
         }
         let n_seg = self.seg_len.len();
         let (k0, _) = self.locate(hint_s.clamp(
             if self.closed { f64::NEG_INFINITY } else { 0.0 },
-            if self.closed { f64::INFINITY } else { self.length },
+            if self.closed {
+                f64::INFINITY
+            } else {
+                self.length
+            },
         ));
         let hint = self.wrap_s(hint_s);
         let mut best = {
@@ -636,9 +765,19 @@ impl Path {
             if scanned >= n_seg {
                 break;
             }
-            let next = if self.closed { (k + 1) % n_seg } else if k + 1 < n_seg { k + 1 } else { break };
+            let next = if self.closed {
+                (k + 1) % n_seg
+            } else if k + 1 < n_seg {
+                k + 1
+            } else {
+                break;
+            };
             let ahead = self.arc_delta(hint, self.s[next]);
-            let ahead = if self.closed && ahead < 0.0 { ahead + self.length } else { ahead };
+            let ahead = if self.closed && ahead < 0.0 {
+                ahead + self.length
+            } else {
+                ahead
+            };
             if ahead > self.window_ahead_m {
                 break;
             }
@@ -657,9 +796,19 @@ impl Path {
             if scanned >= n_seg {
                 break;
             }
-            let prev = if self.closed { (k + n_seg - 1) % n_seg } else if k > 0 { k - 1 } else { break };
+            let prev = if self.closed {
+                (k + n_seg - 1) % n_seg
+            } else if k > 0 {
+                k - 1
+            } else {
+                break;
+            };
             let behind = self.arc_delta(self.s[prev] + self.seg_len[prev], hint);
-            let behind = if self.closed && behind < 0.0 { behind + self.length } else { behind };
+            let behind = if self.closed && behind < 0.0 {
+                behind + self.length
+            } else {
+                behind
+            };
             if behind > self.window_back_m {
                 break;
             }
@@ -675,7 +824,13 @@ impl Path {
         if best.1 == last_fwd {
             let mut k = last_fwd;
             while scanned < n_seg {
-                let next = if self.closed { (k + 1) % n_seg } else if k + 1 < n_seg { k + 1 } else { break };
+                let next = if self.closed {
+                    (k + 1) % n_seg
+                } else if k + 1 < n_seg {
+                    k + 1
+                } else {
+                    break;
+                };
                 let (d2, t) = self.seg_dist2(next, p);
                 scanned += 1;
                 if d2 < best.0 {
@@ -688,7 +843,13 @@ impl Path {
         } else if best.1 == last_bwd {
             let mut k = last_bwd;
             while scanned < n_seg {
-                let prev = if self.closed { (k + n_seg - 1) % n_seg } else if k > 0 { k - 1 } else { break };
+                let prev = if self.closed {
+                    (k + n_seg - 1) % n_seg
+                } else if k > 0 {
+                    k - 1
+                } else {
+                    break;
+                };
                 let (d2, t) = self.seg_dist2(prev, p);
                 scanned += 1;
                 if d2 < best.0 {
@@ -699,7 +860,7 @@ impl Path {
                 }
             }
         }
-        self.make_projection(p, best.1, best.2, best.0)
+        best
     }
 
     /// Projects with a hint when one is given, with the full search otherwise.
@@ -715,7 +876,11 @@ fn check_positive(name: &'static str, v: f64) -> Result<(), PathError> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(PathError::Parameter { name, value: v, message: "must be finite and > 0" })
+        Err(PathError::Parameter {
+            name,
+            value: v,
+            message: "must be finite and > 0",
+        })
     }
 }
 
@@ -728,7 +893,10 @@ mod tests {
         for a in [-10.0, -PI, -3.0, 0.0, 3.0, PI, 10.0, 7.0 * PI] {
             let w = wrap_angle(a);
             assert!(w > -PI - 1e-12 && w <= PI + 1e-12, "{a} -> {w}");
-            assert!(((a - w) / (2.0 * PI)).fract().abs() < 1e-9 || ((a - w) / (2.0 * PI)).fract().abs() > 1.0 - 1e-9);
+            assert!(
+                ((a - w) / (2.0 * PI)).fract().abs() < 1e-9
+                    || ((a - w) / (2.0 * PI)).fract().abs() > 1.0 - 1e-9
+            );
         }
         assert_eq!(wrap_angle(-PI), PI);
     }
@@ -741,7 +909,10 @@ mod tests {
         assert!((pr.lateral_m - 2.5).abs() < 1e-12);
         assert!(pr.heading_rad.abs() < 1e-12);
         let pr = p.project(&Point2::new(30.2, -1.5));
-        assert!((pr.lateral_m + 1.5).abs() < 1e-12, "right of the path is negative");
+        assert!(
+            (pr.lateral_m + 1.5).abs() < 1e-12,
+            "right of the path is negative"
+        );
     }
 
     #[test]
@@ -751,8 +922,14 @@ mod tests {
         assert!((p.length() - 2.0 * PI * r).abs() < 1e-2);
         for s in [0.0, 10.0, 33.3, 100.0] {
             let expected = wrap_angle(s / r);
-            assert!(wrap_angle(p.heading_at(s) - expected).abs() < 1e-4, "heading at {s}");
-            assert!((p.curvature_at(s) - 1.0 / r).abs() < 1e-4, "curvature at {s}");
+            assert!(
+                wrap_angle(p.heading_at(s) - expected).abs() < 1e-4,
+                "heading at {s}"
+            );
+            assert!(
+                (p.curvature_at(s) - 1.0 / r).abs() < 1e-4,
+                "curvature at {s}"
+            );
         }
         // Inside the circle is on the left.
         let pr = p.project(&Point2::new(0.0, 1.0));
@@ -761,7 +938,12 @@ mod tests {
 
     #[test]
     fn duplicates_dropped_and_errors_name_point() {
-        let p = Path::new(&[[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [2.0, 0.0]], None, false).unwrap();
+        let p = Path::new(
+            &[[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [2.0, 0.0]],
+            None,
+            false,
+        )
+        .unwrap();
         assert_eq!(p.len_points(), 3);
         let e = Path::new(&[[0.0, 0.0], [f64::NAN, 0.0]], None, false).unwrap_err();
         assert!(e.to_string().contains("point 1"), "{e}");
@@ -769,24 +951,50 @@ mod tests {
         assert_eq!(e, PathError::TooFewPoints(1));
         let e = Path::new(&[], None, false).unwrap_err();
         assert_eq!(e, PathError::TooFewPoints(0));
-        let w = [Widths { right_m: 1.0, left_m: 1.0 }, Widths { right_m: -1.0, left_m: 1.0 }];
+        let w = [
+            Widths {
+                right_m: 1.0,
+                left_m: 1.0,
+            },
+            Widths {
+                right_m: -1.0,
+                left_m: 1.0,
+            },
+        ];
         let e = Path::new(&[[0.0, 0.0], [1.0, 0.0]], Some(&w), false).unwrap_err();
-        assert!(e.to_string().contains("point 1") && e.to_string().contains("right width"), "{e}");
+        assert!(
+            e.to_string().contains("point 1") && e.to_string().contains("right width"),
+            "{e}"
+        );
     }
 
     #[test]
     fn tum_parse_errors_name_line() {
-        let e = Path::from_tum_str("# x_m,y_m,w_tr_right_m,w_tr_left_m\n0,0,1,1\n1,abc,1,1\n", "t.csv", true).unwrap_err();
+        let e = Path::from_tum_str(
+            "# x_m,y_m,w_tr_right_m,w_tr_left_m\n0,0,1,1\n1,abc,1,1\n",
+            "t.csv",
+            true,
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("t.csv: line 3"), "{e}");
         let e = Path::from_tum_str("# h\n0,0,1,1\n1,0,1\n", "t.csv", true).unwrap_err();
         assert!(e.to_string().contains("line 3"), "{e}");
         let e = Path::from_tum_str("# h\n0,0,1,1\n1,0,-1,1\n", "t.csv", true).unwrap_err();
-        assert!(e.to_string().contains("line 3") && e.to_string().contains(">= 0"), "{e}");
+        assert!(
+            e.to_string().contains("line 3") && e.to_string().contains(">= 0"),
+            "{e}"
+        );
         let e = Path::from_tum_str("# h\n", "t.csv", true).unwrap_err();
         assert!(e.to_string().contains("at least 2"), "{e}");
         let p = Path::from_tum_str("# h\n0,0,1,2\n10,0,1,2\n10,10,1,2\n", "t.csv", true).unwrap();
         assert!(p.is_closed());
-        assert_eq!(p.widths_at(5.0).unwrap(), Widths { right_m: 1.0, left_m: 2.0 });
+        assert_eq!(
+            p.widths_at(5.0).unwrap(),
+            Widths {
+                right_m: 1.0,
+                left_m: 2.0
+            }
+        );
     }
 
     #[test]
@@ -805,7 +1013,10 @@ mod tests {
             kmax = kmax.max(k);
             s += 0.5;
         }
-        assert!(kmin < -0.02 && kmax > 0.035 && kmax < 0.045, "curvature range [{kmin}, {kmax}]");
+        assert!(
+            kmin < -0.02 && kmax > 0.035 && kmax < 0.045,
+            "curvature range [{kmin}, {kmax}]"
+        );
     }
 
     #[test]

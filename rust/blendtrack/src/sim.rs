@@ -14,7 +14,9 @@ use crate::error::{Error, StateError};
 use crate::lateral::AlphaSchedule;
 use crate::longitudinal::Obstacle;
 use crate::path::wrap_angle;
-use crate::vehicle::{Command, Direction, NoiseModel, Sensor, Vehicle, VehicleParams, VehicleState};
+use crate::vehicle::{
+    Command, Direction, NoiseModel, Sensor, Vehicle, VehicleParams, VehicleState,
+};
 use std::f64::consts::PI;
 use std::sync::Arc;
 
@@ -66,31 +68,77 @@ impl SimOptions {
             if v.is_finite() && ok {
                 Ok(())
             } else {
-                Err(StateError::Parameter { name, value: v, message })
+                Err(StateError::Parameter {
+                    name,
+                    value: v,
+                    message,
+                })
             }
         };
-        check("dt_s", self.dt_s, self.dt_s > 0.0 && self.dt_s <= 1.0, "must be in (0, 1] s")?;
-        check("duration_s", self.duration_s, self.duration_s > 0.0, "must be > 0")?;
+        check(
+            "dt_s",
+            self.dt_s,
+            self.dt_s > 0.0 && self.dt_s <= 1.0,
+            "must be in (0, 1] s",
+        )?;
+        check(
+            "duration_s",
+            self.duration_s,
+            self.duration_s > 0.0,
+            "must be > 0",
+        )?;
         if let Some(l) = self.laps {
             check("laps", l, l > 0.0, "must be > 0")?;
         }
         check("delay_s", self.delay_s, self.delay_s >= 0.0, "must be >= 0")?;
         check("start_s_m", self.start_s_m, true, "must be finite")?;
-        check("initial_offset_m", self.initial_offset_m, true, "must be finite")?;
-        check("initial_heading_error_deg", self.initial_heading_error_deg, true, "must be finite")?;
-        check("initial_speed_mps", self.initial_speed_mps, self.initial_speed_mps >= 0.0, "must be >= 0 (a magnitude)")?;
+        check(
+            "initial_offset_m",
+            self.initial_offset_m,
+            true,
+            "must be finite",
+        )?;
+        check(
+            "initial_heading_error_deg",
+            self.initial_heading_error_deg,
+            true,
+            "must be finite",
+        )?;
+        check(
+            "initial_speed_mps",
+            self.initial_speed_mps,
+            self.initial_speed_mps >= 0.0,
+            "must be >= 0 (a magnitude)",
+        )?;
         if let Some(v) = self.fixed_speed_mps {
             check("fixed_speed_mps", v, v >= 0.0, "must be >= 0 (a magnitude)")?;
         }
         let noise_ok = match self.noise {
             NoiseModel::None => true,
-            NoiseModel::Uniform { position_m, heading_deg } => position_m >= 0.0 && heading_deg >= 0.0,
-            NoiseModel::RandomWalk { position_step_m, position_max_m, heading_step_deg, heading_max_deg, interval_s } => {
-                position_step_m >= 0.0 && position_max_m >= 0.0 && heading_step_deg >= 0.0 && heading_max_deg >= 0.0 && interval_s > 0.0
+            NoiseModel::Uniform {
+                position_m,
+                heading_deg,
+            } => position_m >= 0.0 && heading_deg >= 0.0,
+            NoiseModel::RandomWalk {
+                position_step_m,
+                position_max_m,
+                heading_step_deg,
+                heading_max_deg,
+                interval_s,
+            } => {
+                position_step_m >= 0.0
+                    && position_max_m >= 0.0
+                    && heading_step_deg >= 0.0
+                    && heading_max_deg >= 0.0
+                    && interval_s > 0.0
             }
         };
         if !noise_ok {
-            return Err(StateError::Parameter { name: "noise", value: f64::NAN, message: "amplitudes must be >= 0 and the interval > 0" });
+            return Err(StateError::Parameter {
+                name: "noise",
+                value: f64::NAN,
+                message: "amplitudes must be >= 0 and the interval > 0",
+            });
         }
         Ok(())
     }
@@ -182,12 +230,19 @@ pub fn simulate(
     cfg.validate()?;
     validate_vehicle(vehicle_params)?;
     opts.validate()?;
-    schedule
-        .validate()
-        .map_err(|_| StateError::Parameter { name: "alpha_schedule", value: f64::NAN, message: "invalid schedule (alpha outside [0, 1] or bad knots)" })?;
+    schedule.validate().map_err(|_| StateError::Parameter {
+        name: "alpha_schedule",
+        value: f64::NAN,
+        message: "invalid schedule (alpha outside [0, 1] or bad knots)",
+    })?;
     let dt = opts.dt_s;
     let delay_steps = (opts.delay_s / dt).round() as usize;
-    let mut vehicle = Vehicle::new(initial_state(&track, cfg, opts), *vehicle_params, cfg.direction, delay_steps);
+    let mut vehicle = Vehicle::new(
+        initial_state(&track, cfg, opts),
+        *vehicle_params,
+        cfg.direction,
+        delay_steps,
+    );
     let mut ctrl = Controller::new(track.clone(), cfg.clone(), vehicle_params)?;
     // The observer of the true control point keeps its own projection hint.
     let mut truth_hint: Option<f64> = None;
@@ -206,15 +261,28 @@ pub fn simulate(
         }
         let measured = sensor.measure(&vehicle.state, dt);
         let out = ctrl.step_with_alpha(&measured, alpha, &no_obstacles)?;
-        let accel = if opts.fixed_speed_mps.is_some() { 0.0 } else { out.accel_mps2 };
-        vehicle.step(Command { steering_rad: out.steering_rad, accel_mps2: accel }, dt);
+        let accel = if opts.fixed_speed_mps.is_some() {
+            0.0
+        } else {
+            out.accel_mps2
+        };
+        vehicle.step(
+            Command {
+                steering_rad: out.steering_rad,
+                accel_mps2: accel,
+            },
+            dt,
+        );
         if let Some(v) = opts.fixed_speed_mps {
             vehicle.state.v_mps = cfg.direction.sign() * v;
         }
         vehicle.state.check_finite()?;
         distance += vehicle.state.v_mps.abs() * dt;
         let st = vehicle.state;
-        let cp = track.path.project_with(&st.control_point(vehicle_params.wheelbase_m, out.alpha), truth_hint);
+        let cp = track.path.project_with(
+            &st.control_point(vehicle_params.wheelbase_m, out.alpha),
+            truth_hint,
+        );
         truth_hint = Some(cp.s);
         let th_travel = crate::lateral::travel_heading(st.theta_rad, cfg.direction);
         trace.t_s.push(t + dt);
@@ -226,7 +294,9 @@ pub fn simulate(
         trace.alpha.push(out.alpha);
         trace.s_m.push(cp.s);
         trace.lateral_error_m.push(cp.lateral_m);
-        trace.heading_error_rad.push(wrap_angle(th_travel - cp.heading_rad));
+        trace
+            .heading_error_rad
+            .push(wrap_angle(th_travel - cp.heading_rad));
         trace.accel_mps2.push(vehicle.applied_accel_mps2);
         trace.virtual_obstacle_m.push(out.virtual_obstacle_m);
         trace.curvature_per_m.push(cp.curvature_per_m);

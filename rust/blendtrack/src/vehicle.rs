@@ -82,17 +82,33 @@ impl VehicleState {
 
 /// Exact pose after `dt` seconds at constant speed and steering.
 #[inline]
-pub fn integrate_pose(x: f64, y: f64, theta: f64, v: f64, delta: f64, wheelbase_m: f64, dt: f64) -> (f64, f64, f64) {
+pub fn integrate_pose(
+    x: f64,
+    y: f64,
+    theta: f64,
+    v: f64,
+    delta: f64,
+    wheelbase_m: f64,
+    dt: f64,
+) -> (f64, f64, f64) {
     let omega = v * delta.tan() / wheelbase_m;
     let dth = omega * dt;
     if dth.abs() < 1e-9 {
         // Second-order expansion of the arc: exact to O(dth^2) which is ~1e-18 here.
         let th_mid = theta + 0.5 * dth;
-        (x + v * dt * th_mid.cos(), y + v * dt * th_mid.sin(), wrap_angle(theta + dth))
+        (
+            x + v * dt * th_mid.cos(),
+            y + v * dt * th_mid.sin(),
+            wrap_angle(theta + dth),
+        )
     } else {
         let r = v / omega;
         let th1 = theta + dth;
-        (x + r * (th1.sin() - theta.sin()), y - r * (th1.cos() - theta.cos()), wrap_angle(th1))
+        (
+            x + r * (th1.sin() - theta.sin()),
+            y - r * (th1.cos() - theta.cos()),
+            wrap_angle(th1),
+        )
     }
 }
 
@@ -174,7 +190,13 @@ pub enum NoiseModel {
     Uniform { position_m: f64, heading_deg: f64 },
     /// Clamped random walk per component: `e <- clamp(e + U(-step, step), -max, max)`,
     /// updated every `interval_s`.
-    RandomWalk { position_step_m: f64, position_max_m: f64, heading_step_deg: f64, heading_max_deg: f64, interval_s: f64 },
+    RandomWalk {
+        position_step_m: f64,
+        position_max_m: f64,
+        heading_step_deg: f64,
+        heading_max_deg: f64,
+        interval_s: f64,
+    },
 }
 
 /// Stateful sensor: applies a [`NoiseModel`] with its own seeded generator.
@@ -188,28 +210,47 @@ pub struct Sensor {
 
 impl Sensor {
     pub fn new(model: NoiseModel, seed: u64) -> Self {
-        Sensor { model, rng: SplitMix64::new(seed), offset: [0.0; 3], since_update_s: f64::INFINITY }
+        Sensor {
+            model,
+            rng: SplitMix64::new(seed),
+            offset: [0.0; 3],
+            since_update_s: f64::INFINITY,
+        }
     }
 
     /// The measured state after `dt` seconds since the last measurement.
     pub fn measure(&mut self, truth: &VehicleState, dt: f64) -> VehicleState {
         match self.model {
             NoiseModel::None => return *truth,
-            NoiseModel::Uniform { position_m, heading_deg } => {
+            NoiseModel::Uniform {
+                position_m,
+                heading_deg,
+            } => {
                 self.offset = [
                     self.rng.symmetric(position_m),
                     self.rng.symmetric(position_m),
                     self.rng.symmetric(heading_deg.to_radians()),
                 ];
             }
-            NoiseModel::RandomWalk { position_step_m, position_max_m, heading_step_deg, heading_max_deg, interval_s } => {
+            NoiseModel::RandomWalk {
+                position_step_m,
+                position_max_m,
+                heading_step_deg,
+                heading_max_deg,
+                interval_s,
+            } => {
                 self.since_update_s += dt;
                 if self.since_update_s >= interval_s - 1e-9 || !self.since_update_s.is_finite() {
                     self.since_update_s = 0.0;
-                    let steps = [position_step_m, position_step_m, heading_step_deg.to_radians()];
+                    let steps = [
+                        position_step_m,
+                        position_step_m,
+                        heading_step_deg.to_radians(),
+                    ];
                     let maxs = [position_max_m, position_max_m, heading_max_deg.to_radians()];
                     for i in 0..3 {
-                        self.offset[i] = (self.offset[i] + self.rng.symmetric(steps[i])).clamp(-maxs[i], maxs[i]);
+                        self.offset[i] = (self.offset[i] + self.rng.symmetric(steps[i]))
+                            .clamp(-maxs[i], maxs[i]);
                     }
                 }
             }
@@ -247,9 +288,24 @@ pub struct Vehicle {
 impl Vehicle {
     /// `delay_steps` = round(delay / dt) commands are held back; the line is
     /// primed with "hold the current steering, zero acceleration".
-    pub fn new(state: VehicleState, params: VehicleParams, direction: Direction, delay_steps: usize) -> Self {
-        let hold = Command { steering_rad: state.delta_rad, accel_mps2: 0.0 };
-        Vehicle { state, params, direction, delay: std::iter::repeat(hold).take(delay_steps).collect(), delay_steps, applied_accel_mps2: 0.0 }
+    pub fn new(
+        state: VehicleState,
+        params: VehicleParams,
+        direction: Direction,
+        delay_steps: usize,
+    ) -> Self {
+        let hold = Command {
+            steering_rad: state.delta_rad,
+            accel_mps2: 0.0,
+        };
+        Vehicle {
+            state,
+            params,
+            direction,
+            delay: std::iter::repeat(hold).take(delay_steps).collect(),
+            delay_steps,
+            applied_accel_mps2: 0.0,
+        }
     }
 
     pub fn delay_steps(&self) -> usize {
@@ -267,17 +323,40 @@ impl Vehicle {
         let p = &self.params;
         let dmax = p.max_steering_rad();
         let rate = p.max_steering_rate_rad_s() * dt;
-        let target = if cmd.steering_rad.is_finite() { cmd.steering_rad.clamp(-dmax, dmax) } else { self.state.delta_rad };
-        let delta = (self.state.delta_rad + (target - self.state.delta_rad).clamp(-rate, rate)).clamp(-dmax, dmax);
-        let a = if cmd.accel_mps2.is_finite() { cmd.accel_mps2 } else { 0.0 };
+        let target = if cmd.steering_rad.is_finite() {
+            cmd.steering_rad.clamp(-dmax, dmax)
+        } else {
+            self.state.delta_rad
+        };
+        let delta = (self.state.delta_rad + (target - self.state.delta_rad).clamp(-rate, rate))
+            .clamp(-dmax, dmax);
+        let a = if cmd.accel_mps2.is_finite() {
+            cmd.accel_mps2
+        } else {
+            0.0
+        };
         let a = a.clamp(p.max_braking_mps2, p.max_acceleration_mps2);
         let sgn = self.direction.sign();
         let v_travel = self.state.v_mps * sgn;
         let v_new = (v_travel + a * dt).clamp(0.0, p.max_speed_mps);
         self.applied_accel_mps2 = (v_new - v_travel) / dt;
         let v = v_new * sgn;
-        let (x, y, th) = integrate_pose(self.state.x_m, self.state.y_m, self.state.theta_rad, v, delta, p.wheelbase_m, dt);
-        self.state = VehicleState { x_m: x, y_m: y, theta_rad: th, v_mps: v, delta_rad: delta };
+        let (x, y, th) = integrate_pose(
+            self.state.x_m,
+            self.state.y_m,
+            self.state.theta_rad,
+            v,
+            delta,
+            p.wheelbase_m,
+            dt,
+        );
+        self.state = VehicleState {
+            x_m: x,
+            y_m: y,
+            theta_rad: th,
+            v_mps: v,
+            delta_rad: delta,
+        };
     }
 }
 
@@ -302,7 +381,10 @@ mod tests {
         let t = n as f64 * dt;
         let phi = v * t / r;
         let (xe, ye) = (r * phi.sin(), r * (1.0 - phi.cos()));
-        assert!((x - xe).abs() < 1e-9 && (y - ye).abs() < 1e-9, "({x},{y}) vs ({xe},{ye})");
+        assert!(
+            (x - xe).abs() < 1e-9 && (y - ye).abs() < 1e-9,
+            "({x},{y}) vs ({xe},{ye})"
+        );
         assert!(wrap_angle(th - phi).abs() < 1e-9);
         // Backwards: retraces the same circle.
         for _ in 0..n {
@@ -315,7 +397,10 @@ mod tests {
     fn actuator_limits_and_delay() {
         let params = VehicleParams::default();
         let mut veh = Vehicle::new(VehicleState::default(), params, Direction::Forward, 3);
-        let cmd = Command { steering_rad: 1.0, accel_mps2: 100.0 };
+        let cmd = Command {
+            steering_rad: 1.0,
+            accel_mps2: 100.0,
+        };
         for _ in 0..3 {
             veh.step(cmd, 0.1);
             assert_eq!(veh.state.delta_rad, 0.0, "delay holds the command back");
@@ -324,31 +409,61 @@ mod tests {
         veh.step(cmd, 0.1);
         let rate = params.max_steering_rate_rad_s() * 0.1;
         assert!((veh.state.delta_rad - rate).abs() < 1e-12, "rate limited");
-        assert!((veh.state.v_mps - params.max_acceleration_mps2 * 0.1).abs() < 1e-12, "accel limited");
+        assert!(
+            (veh.state.v_mps - params.max_acceleration_mps2 * 0.1).abs() < 1e-12,
+            "accel limited"
+        );
         for _ in 0..100 {
             veh.step(cmd, 0.1);
         }
-        assert!((veh.state.delta_rad - params.max_steering_rad()).abs() < 1e-12, "angle limited");
+        assert!(
+            (veh.state.delta_rad - params.max_steering_rad()).abs() < 1e-12,
+            "angle limited"
+        );
     }
 
     #[test]
     fn braking_stops_and_holds_both_directions() {
         for dir in [Direction::Forward, Direction::Backward] {
-            let s = VehicleState { v_mps: 1.0 * dir.sign(), ..Default::default() };
+            let s = VehicleState {
+                v_mps: 1.0 * dir.sign(),
+                ..Default::default()
+            };
             let mut veh = Vehicle::new(s, VehicleParams::default(), dir, 0);
             for _ in 0..50 {
-                veh.step(Command { steering_rad: 0.0, accel_mps2: -5.0 }, 0.1);
+                veh.step(
+                    Command {
+                        steering_rad: 0.0,
+                        accel_mps2: -5.0,
+                    },
+                    0.1,
+                );
             }
             assert_eq!(veh.state.v_mps, 0.0);
-            veh.step(Command { steering_rad: 0.0, accel_mps2: 1.0 }, 0.1);
+            veh.step(
+                Command {
+                    steering_rad: 0.0,
+                    accel_mps2: 1.0,
+                },
+                0.1,
+            );
             assert!((veh.state.v_mps - 0.1 * dir.sign()).abs() < 1e-12);
         }
     }
 
     #[test]
     fn noise_is_seeded_bounded_and_walk_is_clamped() {
-        let truth = VehicleState { x_m: 1.0, y_m: 2.0, theta_rad: 0.5, v_mps: 3.0, delta_rad: 0.1 };
-        let m = NoiseModel::Uniform { position_m: 0.1, heading_deg: 2.0 };
+        let truth = VehicleState {
+            x_m: 1.0,
+            y_m: 2.0,
+            theta_rad: 0.5,
+            v_mps: 3.0,
+            delta_rad: 0.1,
+        };
+        let m = NoiseModel::Uniform {
+            position_m: 0.1,
+            heading_deg: 2.0,
+        };
         let mut a = Sensor::new(m, 7);
         let mut b = Sensor::new(m, 7);
         let mut c = Sensor::new(m, 8);
@@ -361,7 +476,13 @@ mod tests {
             assert_eq!(ma.v_mps, 3.0);
         }
         assert!(differs);
-        let w = NoiseModel::RandomWalk { position_step_m: 0.05, position_max_m: 0.2, heading_step_deg: 1.0, heading_max_deg: 3.0, interval_s: 0.1 };
+        let w = NoiseModel::RandomWalk {
+            position_step_m: 0.05,
+            position_max_m: 0.2,
+            heading_step_deg: 1.0,
+            heading_max_deg: 3.0,
+            interval_s: 0.1,
+        };
         let mut s = Sensor::new(w, 1);
         let mut maxdev: f64 = 0.0;
         let mut prev = s.measure(&truth, 0.01);
@@ -374,8 +495,14 @@ mod tests {
             }
             prev = m;
         }
-        assert!(maxdev <= 0.2 + 1e-12 && maxdev > 0.15, "walk reaches but never exceeds its clamp: {maxdev}");
-        assert!((900..=1100).contains(&changes), "updates every interval: {changes}");
+        assert!(
+            maxdev <= 0.2 + 1e-12 && maxdev > 0.15,
+            "walk reaches but never exceeds its clamp: {maxdev}"
+        );
+        assert!(
+            (900..=1100).contains(&changes),
+            "updates every interval: {changes}"
+        );
         let _ = PI;
     }
 }

@@ -1,0 +1,186 @@
+//! Projection and ray cast on real race tracks (../shared/tracks) and on a
+//! hairpin: the fast windowed searches agree with brute force where they must
+//! and refuse to jump legs where they must not.
+
+use blendtrack::*;
+use nalgebra::Point2;
+use std::path::PathBuf;
+
+fn shared_track(name: &str) -> Path {
+    let file = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../../../shared/tracks")
+        .join(name);
+    Path::from_tum_csv(&file, true)
+        .unwrap_or_else(|e| panic!("the shared tracks must sit beside the repo: {e}"))
+}
+
+/// Deterministic pseudo-random numbers in [-1, 1).
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+}
+
+#[test]
+fn nuerburgring_loads_with_widths() {
+    let p = shared_track("Nuerburgring.csv");
+    assert_eq!(p.len_points(), 1029);
+    assert!(p.is_closed());
+    assert!((p.length() - 5144.0).abs() < 30.0, "lap {}", p.length());
+    let w = p.widths_at(0.0).unwrap();
+    assert!((w.right_m - 7.288).abs() < 1e-9 && (w.left_m - 7.487).abs() < 1e-9);
+}
+
+#[test]
+fn windowed_projection_equals_brute_force_near_the_track() {
+    for name in [
+        "Nuerburgring.csv",
+        "Monza.csv",
+        "Hockenheim.csv",
+        "Zandvoort.csv",
+    ] {
+        let p = shared_track(name);
+        let mut rng = Lcg(7);
+        let mut hint = 0.0;
+        let mut checked = 0;
+        let mut s = 0.0;
+        while s < p.length() {
+            // A point within 3 m of the centreline, hint from the previous step.
+            let c = p.point_at(s);
+            let h = p.heading_at(s);
+            let off = 3.0 * rng.next();
+            let q = Point2::new(
+                c.x - off * h.sin() + 0.5 * rng.next(),
+                c.y + off * h.cos() + 0.5 * rng.next(),
+            );
+            let fast = p.project_hinted(&q, hint);
+            let full = p.project(&q);
+            let brute = p.project_brute_force(&q);
+            assert!(
+                (fast.lateral_m.abs() - brute.lateral_m.abs()).abs() < 1e-9,
+                "{name} s={s}: hinted {fast:?} vs brute {brute:?}"
+            );
+            assert!(
+                (full.lateral_m.abs() - brute.lateral_m.abs()).abs() < 1e-9,
+                "{name} s={s}: full {full:?} vs brute {brute:?}"
+            );
+            assert!(
+                p.arc_delta(fast.s, brute.s).abs() < 1.0,
+                "{name} s={s}: same place on the track"
+            );
+            hint = fast.s;
+            s += 2.7;
+            checked += 1;
+        }
+        assert!(checked > 1000, "{name}: {checked}");
+    }
+}
+
+#[test]
+fn hinted_projection_does_not_jump_to_the_other_leg_of_a_hairpin() {
+    // Two parallel 100 m legs 6 m apart joined by a half circle of radius 3 m.
+    let mut pts = Vec::new();
+    for i in 0..=100 {
+        pts.push([i as f64, 0.0]);
+    }
+    for k in 1..30 {
+        let a = -std::f64::consts::FRAC_PI_2 + std::f64::consts::PI * k as f64 / 30.0;
+        pts.push([100.0 + 3.0 * a.cos(), 3.0 + 3.0 * a.sin()]);
+    }
+    for i in (0..=100).rev() {
+        pts.push([i as f64, 6.0]);
+    }
+    let p = Path::new(&pts, None, false).unwrap();
+    // A vehicle on the first leg, drifted 4 m toward the other leg: the
+    // nearest point overall is on the other leg, the tracked one is not.
+    let q = Point2::new(50.0, 4.0);
+    let brute = p.project_brute_force(&q);
+    assert!(
+        brute.s > 150.0,
+        "brute force picks the other leg: {brute:?}"
+    );
+    let hinted = p.project_hinted(&q, 49.0);
+    assert!(
+        (hinted.s - 50.0).abs() < 1e-9 && (hinted.lateral_m - 4.0).abs() < 1e-9,
+        "{hinted:?}"
+    );
+    // Driving along the first leg step by step keeps the first leg.
+    let mut hint = 0.0;
+    for i in 0..90 {
+        let pr = p.project_hinted(&Point2::new(i as f64 + 0.3, 3.9), hint);
+        assert!(pr.s < 100.0, "step {i}: jumped to {}", pr.s);
+        hint = pr.s;
+    }
+}
+
+#[test]
+fn hinted_projection_catches_up_after_a_long_jump() {
+    // A hint far behind (a vehicle that was teleported) still finds the right place by walking.
+    let p = Path::straight(1000.0, 2.0).unwrap();
+    let pr = p.project_hinted(&Point2::new(600.0, 1.0), 10.0);
+    assert!((pr.s - 600.0).abs() < 1e-9, "{pr:?}");
+}
+
+#[test]
+fn ray_cast_window_equals_full_scan_on_real_tracks() {
+    let cfg = ControllerConfig::default();
+    for name in ["Nuerburgring.csv", "Monza.csv"] {
+        let p = shared_track(name);
+        let cor = Corridor::new(&p, &cfg);
+        let mut rng = Lcg(11);
+        let mut s = 0.0;
+        let mut hits = 0;
+        while s < p.length() {
+            let c = p.point_at(s);
+            let h = p.heading_at(s);
+            let off = 2.0 * rng.next();
+            let q = Point2::new(c.x - off * h.sin(), c.y + off * h.cos());
+            let heading = h + 0.2 * rng.next();
+            let pr = p.project_hinted(&q, s);
+            let fast = cor.ray_cast(&p, &q, heading, pr.s, 1e6);
+            let all = cor.ray_cast_all(&p, &q, heading);
+            match (fast, all) {
+                (Some(a), Some(b)) => {
+                    assert!((a - b).abs() < 1e-9, "{name} s={s}: {a} vs {b}");
+                    hits += 1;
+                }
+                (a, b) => assert_eq!(a, b, "{name} s={s}"),
+            }
+            s += 5.3;
+        }
+        assert!(hits > 500, "{name}: {hits}");
+    }
+}
+
+#[test]
+fn track_widths_drive_the_borders() {
+    // The TUM widths (about 7.4 m a side) are used unless disabled.
+    let p = shared_track("Nuerburgring.csv");
+    let with = Corridor::new(&p, &ControllerConfig::default());
+    let without = Corridor::new(
+        &p,
+        &ControllerConfig {
+            use_path_widths: false,
+            path_width_m: 4.0,
+            ..Default::default()
+        },
+    );
+    let c = p.points()[0];
+    let dl = (with.left()[0] - c).norm();
+    let dr = (with.right()[0] - c).norm();
+    assert!((dl - 7.487).abs() < 1e-9 && (dr - 7.288).abs() < 1e-9);
+    assert!(((without.left()[0] - c).norm() - 2.0).abs() < 1e-9);
+    let margin = Corridor::new(
+        &p,
+        &ControllerConfig {
+            border_margin_m: -1.0,
+            ..Default::default()
+        },
+    );
+    assert!(((margin.left()[0] - c).norm() - 6.487).abs() < 1e-9);
+}
