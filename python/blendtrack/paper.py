@@ -33,6 +33,7 @@ runs; nothing in it is canned.
 from __future__ import annotations
 
 import math
+import sys
 import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -179,7 +180,7 @@ def reproduce(track_file: FsPath, out: FsPath, scale: float | None = None, tests
             )
         )
     results: dict[str, tuple[pd.DataFrame, dict[str, float]]] = {}
-    for key, job in tqdm(jobs, desc="blendtrack paper", unit="run", file=__import__("sys").stderr, disable=None):
+    for key, job in tqdm(jobs, desc="blendtrack paper", unit="run", file=sys.stderr, disable=None):
         results[key] = job()
 
     figs: list[str] = []
@@ -230,12 +231,12 @@ def reproduce(track_file: FsPath, out: FsPath, scale: float | None = None, tests
     )
     lines.append("")
     clean = {label: results[f"1/{label}/clean"] for label, _ in controllers}
-    noisy = {label: results[f"1/{label}/noise"] for label, _ in controllers}
+    noisy_runs = {label: results[f"1/{label}/noise"] for label, _ in controllers}
     lines.append(f"![]({fig('sim_trajectory.png', lambda p: plots.trajectory({k: v[0] for k, v in clean.items()}, track, p, 'Scaled track, ideal sensing'))})\n")
     lines.append(f"![]({fig('sim_lateral_error.png', lambda p: plots.lateral_error({k: v[0] for k, v in clean.items()}, p, 'Lateral error of the control point, ideal sensing'))})\n")
     lines.append(f"![]({fig('sim_heading_error.png', lambda p: plots.heading_error({k: v[0] for k, v in clean.items()}, p, 'Heading error, ideal sensing'))})\n")
-    lines.append(f"![]({fig('sim_lateral_error_noise.png', lambda p: plots.lateral_error({k: v[0] for k, v in noisy.items()}, p, 'Lateral error, noise + delay'))})\n")
-    lines.append(f"![]({fig('sim_heading_error_noise.png', lambda p: plots.heading_error({k: v[0] for k, v in noisy.items()}, p, 'Heading error, noise + delay'))})\n")
+    lines.append(f"![]({fig('sim_lateral_error_noise.png', lambda p: plots.lateral_error({k: v[0] for k, v in noisy_runs.items()}, p, 'Lateral error, noise + delay'))})\n")
+    lines.append(f"![]({fig('sim_heading_error_noise.png', lambda p: plots.heading_error({k: v[0] for k, v in noisy_runs.items()}, p, 'Heading error, noise + delay'))})\n")
     # Generated comparison with the paper's qualitative claims.
     pp, st, bl = (clean[label][1] for label, _ in controllers)
     claims = []
@@ -253,7 +254,7 @@ def reproduce(track_file: FsPath, out: FsPath, scale: float | None = None, tests
         f"- Paper: reaches the trajectory faster than Stanley. Here the settling time (|e| < 0.1 m for good) is "
         f"{_fmt(bl['settling_time_s'], 1)} s for the proposed command and {_fmt(st['settling_time_s'], 1)} s for Stanley."
     )
-    nb = noisy["proposed (alpha = 0.5)"][1]
+    nb = noisy_runs["proposed (alpha = 0.5)"][1]
     claims.append(
         f"- With noise and delay the proposed command's mean |e| after settling goes from "
         f"{_fmt(bl['lateral_error_mean_abs_m_settled'])} m to {_fmt(nb['lateral_error_mean_abs_m_settled'])} m "
