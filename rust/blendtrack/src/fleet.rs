@@ -291,87 +291,133 @@ impl Fleet {
         Ok(())
     }
 
-    /// Steps the listed vehicles once (see the module docs).
+    /// Steps the listed vehicles once (see the module docs). Large batches
+    /// are split over the available cores (scoped threads); each vehicle's
+    /// result does not depend on the split.
     pub fn step(&mut self, inp: &FleetInputs<'_>) -> Result<FleetOutputs, FleetError> {
         self.check(inp)?;
         let n = inp.slots.len();
-        let col = || Vec::with_capacity(n);
-        let mut out = FleetOutputs {
-            ok: Vec::with_capacity(n),
-            steering_rad: col(),
-            accel_mps2: col(),
-            alpha: col(),
-            lateral_error_m: col(),
-            heading_error_rad: col(),
-            s_m: col(),
-            curvature_per_m: col(),
-            virtual_obstacle_m: col(),
-            next: inp.dt_s.map(|_| NextStates { x_m: col(), y_m: col(), theta_rad: col(), v_mps: col(), delta_rad: col() }),
-        };
-        let opt = |c: Option<&[f64]>, i: usize| c.map_or(f64::NAN, |c| c[i]);
-        let mut obstacles: Vec<Obstacle> = Vec::with_capacity(2);
-        for i in 0..n {
-            let slot = inp.slots[i] as usize; // checked in check()
-            let e = self.slots[slot].as_mut().expect("check() verified every slot");
-            let state = VehicleState { x_m: inp.x_m[i], y_m: inp.y_m[i], theta_rad: inp.theta_rad[i], v_mps: inp.v_mps[i], delta_rad: inp.delta_rad[i] };
-            let a = opt(inp.alpha, i);
-            let alpha = if a.is_nan() { e.controller.config().lat_blend_factor } else { a };
-            obstacles.clear();
-            let gap = opt(inp.leader_gap_m, i);
-            if gap.is_finite() {
-                let vl = opt(inp.leader_speed_mps, i);
-                obstacles.push(Obstacle { gap_m: gap, speed_mps: if vl.is_finite() { vl.max(0.0) } else { 0.0 } });
+        // One &mut per listed slot, in input order (slots are unique: checked).
+        let mut by_slot: Vec<Option<&mut Entry>> = self.slots.iter_mut().map(Option::as_mut).collect();
+        let mut entries: Vec<&mut Entry> = inp.slots.iter().map(|&s| by_slot[s as usize].take().expect("check() verified every slot once")).collect();
+        let mut rows = vec![Row::default(); n];
+        let threads = if n >= PARALLEL_MIN_VEHICLES { std::thread::available_parallelism().map_or(1, |p| p.get()).min(MAX_THREADS) } else { 1 };
+        if threads <= 1 {
+            for (i, (e, row)) in entries.iter_mut().zip(rows.iter_mut()).enumerate() {
+                *row = step_one(e, inp, i);
             }
-            let stop = opt(inp.stop_gap_m, i);
-            if stop.is_finite() {
-                obstacles.push(Obstacle { gap_m: stop, speed_mps: 0.0 });
-            }
-            match e.controller.step_with_alpha(&state, alpha, &obstacles) {
-                Ok(o) => {
-                    out.ok.push(true);
-                    out.steering_rad.push(o.steering_rad);
-                    out.accel_mps2.push(o.accel_mps2);
-                    out.alpha.push(o.alpha);
-                    out.lateral_error_m.push(o.lateral_error_m);
-                    out.heading_error_rad.push(o.heading_error_rad);
-                    out.s_m.push(o.s_m);
-                    out.curvature_per_m.push(o.curvature_per_m);
-                    out.virtual_obstacle_m.push(o.virtual_obstacle_m);
-                    if let (Some(next), Some(dt)) = (out.next.as_mut(), inp.dt_s) {
-                        let mut veh = Vehicle::new(state, e.params, e.controller.config().direction, 0);
-                        veh.step(Command { steering_rad: o.steering_rad, accel_mps2: o.accel_mps2 }, dt);
-                        let s = veh.state;
-                        next.x_m.push(s.x_m);
-                        next.y_m.push(s.y_m);
-                        next.theta_rad.push(s.theta_rad);
-                        next.v_mps.push(s.v_mps);
-                        next.delta_rad.push(s.delta_rad);
-                    }
-                }
-                Err(_) => {
-                    let nan = f64::NAN;
-                    out.ok.push(false);
-                    for c in [
-                        &mut out.steering_rad,
-                        &mut out.accel_mps2,
-                        &mut out.alpha,
-                        &mut out.lateral_error_m,
-                        &mut out.heading_error_rad,
-                        &mut out.s_m,
-                        &mut out.curvature_per_m,
-                        &mut out.virtual_obstacle_m,
-                    ] {
-                        c.push(nan);
-                    }
-                    if let Some(next) = out.next.as_mut() {
-                        for c in [&mut next.x_m, &mut next.y_m, &mut next.theta_rad, &mut next.v_mps, &mut next.delta_rad] {
-                            c.push(nan);
+        } else {
+            let chunk = n.div_ceil(threads);
+            std::thread::scope(|scope| {
+                for (c, (es, rs)) in entries.chunks_mut(chunk).zip(rows.chunks_mut(chunk)).enumerate() {
+                    scope.spawn(move || {
+                        for (j, (e, row)) in es.iter_mut().zip(rs.iter_mut()).enumerate() {
+                            *row = step_one(e, inp, c * chunk + j);
                         }
-                    }
+                    });
                 }
-            }
+            });
         }
-        Ok(out)
+        let col = |f: fn(&Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+        Ok(FleetOutputs {
+            ok: rows.iter().map(|r| r.ok).collect(),
+            steering_rad: col(|r| r.steering_rad),
+            accel_mps2: col(|r| r.accel_mps2),
+            alpha: col(|r| r.alpha),
+            lateral_error_m: col(|r| r.lateral_error_m),
+            heading_error_rad: col(|r| r.heading_error_rad),
+            s_m: col(|r| r.s_m),
+            curvature_per_m: col(|r| r.curvature_per_m),
+            virtual_obstacle_m: col(|r| r.virtual_obstacle_m),
+            next: inp.dt_s.map(|_| NextStates {
+                x_m: col(|r| r.next.x_m),
+                y_m: col(|r| r.next.y_m),
+                theta_rad: col(|r| r.next.theta_rad),
+                v_mps: col(|r| r.next.v_mps),
+                delta_rad: col(|r| r.next.delta_rad),
+            }),
+        })
+    }
+}
+
+/// Below this many vehicles a step runs on the calling thread only.
+const PARALLEL_MIN_VEHICLES: usize = 2048;
+const MAX_THREADS: usize = 8;
+
+/// One vehicle's outputs.
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    ok: bool,
+    steering_rad: f64,
+    accel_mps2: f64,
+    alpha: f64,
+    lateral_error_m: f64,
+    heading_error_rad: f64,
+    s_m: f64,
+    curvature_per_m: f64,
+    virtual_obstacle_m: f64,
+    next: VehicleState,
+}
+
+impl Default for Row {
+    fn default() -> Self {
+        let nan = f64::NAN;
+        Row {
+            ok: false,
+            steering_rad: nan,
+            accel_mps2: nan,
+            alpha: nan,
+            lateral_error_m: nan,
+            heading_error_rad: nan,
+            s_m: nan,
+            curvature_per_m: nan,
+            virtual_obstacle_m: nan,
+            next: VehicleState { x_m: nan, y_m: nan, theta_rad: nan, v_mps: nan, delta_rad: nan },
+        }
+    }
+}
+
+/// Steps entry `e` with input row `i`; an unusable input gives the NaN row.
+fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
+    let opt = |c: Option<&[f64]>| c.map_or(f64::NAN, |c| c[i]);
+    let state = VehicleState { x_m: inp.x_m[i], y_m: inp.y_m[i], theta_rad: inp.theta_rad[i], v_mps: inp.v_mps[i], delta_rad: inp.delta_rad[i] };
+    let a = opt(inp.alpha);
+    let alpha = if a.is_nan() { e.controller.config().lat_blend_factor } else { a };
+    let mut obstacles = [Obstacle { gap_m: 0.0, speed_mps: 0.0 }; 2];
+    let mut n_obs = 0;
+    let gap = opt(inp.leader_gap_m);
+    if gap.is_finite() {
+        let vl = opt(inp.leader_speed_mps);
+        obstacles[n_obs] = Obstacle { gap_m: gap, speed_mps: if vl.is_finite() { vl.max(0.0) } else { 0.0 } };
+        n_obs += 1;
+    }
+    let stop = opt(inp.stop_gap_m);
+    if stop.is_finite() {
+        obstacles[n_obs] = Obstacle { gap_m: stop, speed_mps: 0.0 };
+        n_obs += 1;
+    }
+    let Ok(o) = e.controller.step_with_alpha(&state, alpha, &obstacles[..n_obs]) else {
+        return Row::default();
+    };
+    let next = match inp.dt_s {
+        Some(dt) => {
+            let mut veh = Vehicle::new(state, e.params, e.controller.config().direction, 0);
+            veh.step(Command { steering_rad: o.steering_rad, accel_mps2: o.accel_mps2 }, dt);
+            veh.state
+        }
+        None => Row::default().next,
+    };
+    Row {
+        ok: true,
+        steering_rad: o.steering_rad,
+        accel_mps2: o.accel_mps2,
+        alpha: o.alpha,
+        lateral_error_m: o.lateral_error_m,
+        heading_error_rad: o.heading_error_rad,
+        s_m: o.s_m,
+        curvature_per_m: o.curvature_per_m,
+        virtual_obstacle_m: o.virtual_obstacle_m,
+        next,
     }
 }
 
@@ -509,6 +555,18 @@ mod tests {
         f.set_vehicle_config(0, ControllerConfig { lat_blend_factor: 0.9, ..Default::default() }).unwrap();
         assert_eq!(f.vehicle_config(0).unwrap().lat_blend_factor, 0.9);
         assert_eq!(f.len(), 4);
+        // A batch large enough to be split over threads equals the serial one.
+        let n = 3 * PARALLEL_MIN_VEHICLES / 2;
+        let (mut big, big_slots) = fleet_with(n);
+        let st = states(n, 1);
+        let [x, y, th, v, d] = cols(&st);
+        let par = big.step(&FleetInputs { dt_s: Some(0.1), ..FleetInputs::new(&big_slots, &x, &y, &th, &v, &d) }).unwrap();
+        let (mut small, small_slots) = fleet_with(n);
+        for i in (0..n).step_by(97) {
+            let one = small.step(&FleetInputs { dt_s: Some(0.1), ..FleetInputs::new(&small_slots[i..i + 1], &x[i..i + 1], &y[i..i + 1], &th[i..i + 1], &v[i..i + 1], &d[i..i + 1]) }).unwrap();
+            assert_eq!(par.steering_rad[i], one.steering_rad[0]);
+            assert_eq!(par.next.as_ref().unwrap().theta_rad[i], one.next.as_ref().unwrap().theta_rad[0]);
+        }
         // Empty step is fine.
         let out = f.step(&FleetInputs::new(&[], &[], &[], &[], &[], &[])).unwrap();
         assert!(out.ok.is_empty());
