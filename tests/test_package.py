@@ -41,19 +41,34 @@ def test_version_of_native_module_matches_pyproject() -> None:
 
 
 def test_public_names_are_the_native_ones() -> None:
+    # Every public name is the native object itself, except the Python-side
+    # helpers of blendtrack.simulation.
+    from blendtrack import simulation
+
     for name in blendtrack.__all__:
-        assert getattr(blendtrack, name) is getattr(_blendtrack, name), name
+        if hasattr(simulation, name) and not hasattr(_blendtrack, name) or name == "simulate":
+            assert getattr(blendtrack, name) is getattr(simulation, name), name
+        else:
+            assert getattr(blendtrack, name) is getattr(_blendtrack, name), name
 
 
 @pytest.mark.parametrize(
     "cls",
-    [blendtrack.ConfigError, blendtrack.PathError, blendtrack.SimulationError],
+    [blendtrack.ConfigError, blendtrack.PathError, blendtrack.SimulationError, blendtrack.InputError],
 )
 def test_exception_hierarchy(cls: type[Exception]) -> None:
     assert cls.__mro__[1] is blendtrack.BlendtrackError
     assert blendtrack.BlendtrackError.__mro__[1] is Exception
     with pytest.raises(blendtrack.BlendtrackError, match="bad key 'x'"):
         raise cls("bad key 'x'")
+
+
+def test_input_error_is_also_a_value_error() -> None:
+    assert issubclass(blendtrack.InputError, ValueError)
+    err = blendtrack.InputError("argument `x` has 2 entries")
+    assert type(err).__module__ == "blendtrack"
+    copy = pickle.loads(pickle.dumps(err))
+    assert type(copy) is blendtrack.InputError
 
 
 def test_exceptions_are_siblings() -> None:

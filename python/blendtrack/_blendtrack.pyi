@@ -4,15 +4,32 @@ Keep in step with the module: scripts/test runs
 ``python -m mypy.stubtest blendtrack._blendtrack`` against the build.
 """
 
+import os
+from typing import Any, final
+
+import numpy as np
+import numpy.typing as npt
+
 __all__ = [
     "__version__",
     "BlendtrackError",
     "ConfigError",
     "PathError",
     "SimulationError",
+    "InputError",
+    "Path",
+    "ControllerConfig",
+    "VehicleParams",
+    "load_config",
+    "simulate",
+    "compute_metrics",
+    "Fleet",
 ]
 
 __version__: str
+
+_F64 = npt.NDArray[np.float64]
+_ArrayLike = npt.ArrayLike
 
 class BlendtrackError(Exception):
     """Base class of every error raised by blendtrack."""
@@ -25,3 +42,152 @@ class PathError(BlendtrackError):
 
 class SimulationError(BlendtrackError):
     """A simulation that cannot proceed."""
+
+class InputError(BlendtrackError, ValueError):
+    """A bad argument to a call: wrong array length, unknown slot or track, bad time step (the message names it)."""
+
+@final
+class Path:
+    def __new__(cls, points: npt.NDArray[np.float64], widths: npt.NDArray[np.float64] | None = None, closed: bool = False) -> Path: ...
+    @staticmethod
+    def from_tum_csv(file: str | os.PathLike[str], closed: bool = True) -> Path: ...
+    @staticmethod
+    def straight(length_m: float, spacing_m: float = 1.0) -> Path: ...
+    @staticmethod
+    def circle(radius_m: float, max_sagitta_m: float = 0.001) -> Path: ...
+    @staticmethod
+    def test_track(spacing_m: float = 1.0) -> Path: ...
+    def scaled(self, factor: float) -> Path: ...
+    @property
+    def length_m(self) -> float: ...
+    @property
+    def is_closed(self) -> bool: ...
+    @property
+    def has_widths(self) -> bool: ...
+    def __len__(self) -> int: ...
+    def points(self) -> _F64: ...
+    def widths(self) -> _F64 | None: ...
+    def vertex_s(self) -> _F64: ...
+    def point_at(self, s_m: float) -> tuple[float, float]: ...
+    def heading_at(self, s_m: float) -> float: ...
+    def curvature_at(self, s_m: float) -> float: ...
+    def project(self, x_m: float, y_m: float) -> dict[str, float]: ...
+
+@final
+class ControllerConfig:
+    lat_blend_factor: float
+    acceleration_exp: float
+    deceleration_factor: float
+    max_deceleration: float
+    max_obs_deceleration: float
+    path_width_m: float
+    preferred_acceleration: float
+    preferred_deceleration: float
+    preferred_speed: float
+    preferred_stop_dist: float
+    reaction_time: float
+    direction: str
+    lateral_controller: str
+    stanley_gain: float
+    stanley_gain_reverse: float
+    stanley_softening_mps: float
+    target_distance_min_m: float
+    target_distance_gain_s: float
+    curvature_lookahead_gain_s: float
+    pure_pursuit_gain_s: float
+    pure_pursuit_min_lookahead_m: float
+    use_path_widths: bool
+    border_margin_m: float
+    ray_horizon_m: float
+    def __new__(cls, **kwargs: Any) -> ControllerConfig: ...
+    def replace(self, **kwargs: Any) -> ControllerConfig: ...
+    def validate(self) -> None: ...
+    @staticmethod
+    def from_toml(text: str, source: str = "<string>") -> ControllerConfig: ...
+    @staticmethod
+    def load(file: str | os.PathLike[str]) -> ControllerConfig: ...
+    def to_toml(self, table: bool = False) -> str: ...
+    def to_dict(self) -> dict[str, Any]: ...
+    def __copy__(self) -> ControllerConfig: ...
+    def __deepcopy__(self, _memo: Any) -> ControllerConfig: ...
+    def __eq__(self, value: object, /) -> bool: ...
+
+@final
+class VehicleParams:
+    wheelbase_m: float
+    max_steering_deg: float
+    max_steering_rate_deg_s: float
+    max_acceleration_mps2: float
+    max_braking_mps2: float
+    max_speed_mps: float
+    def __new__(cls, **kwargs: Any) -> VehicleParams: ...
+    def replace(self, **kwargs: Any) -> VehicleParams: ...
+    def validate(self) -> None: ...
+    @staticmethod
+    def from_toml(text: str, source: str = "<string>") -> VehicleParams: ...
+    @staticmethod
+    def load(file: str | os.PathLike[str]) -> VehicleParams: ...
+    def to_toml(self) -> str: ...
+    def to_dict(self) -> dict[str, Any]: ...
+    def __eq__(self, value: object, /) -> bool: ...
+
+def load_config(file: str | os.PathLike[str]) -> tuple[ControllerConfig, VehicleParams]: ...
+def simulate(
+    path: Path,
+    config: ControllerConfig | None = None,
+    vehicle: VehicleParams | None = None,
+    *,
+    alpha: float | None = None,
+    alpha_sine_omega: float | None = None,
+    alpha_knots: tuple[_F64, _F64] | None = None,
+    dt_s: float = 0.01,
+    duration_s: float = 60.0,
+    laps: float | None = None,
+    noise: dict[str, Any] | None = None,
+    delay_s: float = 0.0,
+    seed: int = 0,
+    start_s_m: float = 0.0,
+    offset_m: float = 0.0,
+    heading_error_deg: float = 0.0,
+    initial_speed_mps: float = 0.0,
+    fixed_speed_mps: float | None = None,
+) -> tuple[dict[str, _F64], dict[str, float]]: ...
+def compute_metrics(
+    t_s: _F64,
+    lateral_error_m: _F64,
+    heading_error_rad: _F64,
+    delta_rad: _F64,
+    v_mps: _F64,
+    distance_m: _F64,
+    wheelbase_m: float = 2.6,
+) -> dict[str, float]: ...
+
+@final
+class Fleet:
+    def __new__(cls) -> Fleet: ...
+    def add_track(self, path: Path, config: ControllerConfig | None = None) -> int: ...
+    def add_vehicle(self, track_id: int, config: ControllerConfig | None = None, vehicle: VehicleParams | None = None) -> int: ...
+    def remove_vehicle(self, slot: int) -> None: ...
+    def reset_vehicle(self, slot: int) -> None: ...
+    def set_vehicle_config(self, slot: int, config: ControllerConfig) -> None: ...
+    def vehicle_config(self, slot: int) -> ControllerConfig: ...
+    def vehicle_params(self, slot: int) -> VehicleParams: ...
+    def vehicle_track(self, slot: int) -> int: ...
+    def slots(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def n_tracks(self) -> int: ...
+    def __len__(self) -> int: ...
+    def step(
+        self,
+        slots: _ArrayLike,
+        x: _ArrayLike,
+        y: _ArrayLike,
+        theta: _ArrayLike,
+        v: _ArrayLike,
+        delta: _ArrayLike,
+        alpha: _ArrayLike | None = None,
+        leader_gap: _ArrayLike | None = None,
+        leader_speed: _ArrayLike | None = None,
+        stop_gap: _ArrayLike | None = None,
+        dt: float | None = None,
+    ) -> dict[str, npt.NDArray[Any]]: ...

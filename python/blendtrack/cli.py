@@ -4,14 +4,24 @@ Each subcommand is a function ``_cmd_NAME(args) -> int`` registered in
 ``_build_parser`` with its own arguments; ``main`` returns its exit code.
 Argument errors exit with code 2 and print exactly one line to stderr (no
 usage block, no traceback), so scripts and logs show the reason and nothing
-else.
+else. Errors that blendtrack raises for bad input (``BlendtrackError``: an
+unknown track, an unreadable file, an out-of-range value) are argument
+errors too.
+
+Subcommands:
+- ``version``: print the version.
+- ``sim``: one closed-loop run; writes timeseries.csv, metrics.json and plots.
+- ``paper``: reproduces the paper's experiments; writes report.md and figures.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import math
 import sys
 from collections.abc import Sequence
+from pathlib import Path as FsPath
 from typing import NoReturn
 
 import blendtrack
@@ -29,25 +39,229 @@ def _cmd_version(args: argparse.Namespace) -> int:
     return 0
 
 
+def _finite(kind: str, low: float | None = None, strict: bool = False, high: float | None = None):  # type: ignore[no-untyped-def]
+    """argparse type: a finite float within bounds."""
+
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{kind} must be a number, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"{kind} must be finite, got {text!r}")
+        if low is not None and (value <= low if strict else value < low):
+            raise argparse.ArgumentTypeError(f"{kind} must be {'>' if strict else '>='} {low:g}, got {text}")
+        if high is not None and value > high:
+            raise argparse.ArgumentTypeError(f"{kind} must be <= {high:g}, got {text}")
+        return value
+
+    parse.__name__ = kind
+    return parse
+
+
+def _json_metrics(metrics: dict[str, float]) -> dict[str, float | None]:
+    """The metrics.json keys; NaN (undefined, e.g. never settled) becomes null: strict JSON."""
+    from blendtrack.simulation import METRIC_KEYS
+
+    return {k: (metrics[k] if math.isfinite(metrics[k]) else None) for k in METRIC_KEYS}
+
+
+def _cmd_sim(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from blendtrack import plots
+    from blendtrack.simulation import load_track, simulate
+
+    path = load_track(args.track, args.scale)
+    config = blendtrack.ControllerConfig()
+    vehicle = blendtrack.VehicleParams()
+    if args.config is not None:
+        if not FsPath(args.config).is_file():
+            raise blendtrack.ConfigError(f"cannot read config file {args.config}: no such file")
+        config, vehicle = blendtrack.load_config(args.config)
+    overrides: dict[str, object] = {}
+    if args.controller is not None:
+        overrides["lateral_controller"] = args.controller.replace("-", "_")
+    if args.direction is not None:
+        overrides["direction"] = args.direction
+    if args.speed is not None:
+        overrides["preferred_speed"] = args.speed
+    if args.alpha is not None:
+        overrides["lat_blend_factor"] = args.alpha
+    config = config.replace(**overrides)
+    alpha: str | None = args.alpha_schedule
+    if args.laps is not None:
+        # Generous cap: ten times the lap time at the preferred speed.
+        duration = max(60.0, 10.0 * args.laps * path.length_m / config.preferred_speed)
+    else:
+        duration = args.duration
+    out = FsPath(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    steps = ["simulate", "timeseries.csv", "metrics.json", "plots"]
+    with tqdm(total=len(steps), desc="blendtrack sim", unit="step", file=sys.stderr, disable=None) as bar:
+        frame, metrics = simulate(
+            path,
+            config,
+            vehicle,
+            alpha=alpha,
+            dt_s=args.dt,
+            duration_s=duration,
+            laps=args.laps,
+            noise=args.noise,
+            delay_s=args.delay,
+            seed=args.seed,
+            offset_m=args.offset,
+            heading_error_deg=args.heading_error_deg,
+        )
+        bar.update()
+        frame.to_csv(out / "timeseries.csv", index=False)
+        bar.update()
+        with open(out / "metrics.json", "w") as f:
+            json.dump(_json_metrics(metrics), f, indent=2, allow_nan=False)
+            f.write("\n")
+        bar.update()
+        runs = {args.track: frame}
+        plots.trajectory(runs, path, out / "trajectory.png")
+        plots.lateral_error(runs, out / "lateral_error.png")
+        plots.heading_error(runs, out / "heading_error.png")
+        plots.steering(runs, out / "steering.png")
+        plots.speed(runs, out / "speed.png")
+        bar.update()
+    m = metrics
+    print(
+        f"{out}: {len(frame)} steps, {m['distance_m']:.1f} m, mean |e| {m['lateral_error_mean_abs_m']:.4f} m, "
+        f"after settling {m['lateral_error_mean_abs_m_settled']:.4f} m (settled at {m['settling_time_s']:.2f} s)"
+    )
+    return 0
+
+
+def _cmd_paper(args: argparse.Namespace) -> int:
+    from blendtrack import paper
+
+    if not FsPath(args.track).is_file():
+        raise blendtrack.PathError(f"cannot read track file {args.track}: no such file")
+    report = paper.reproduce(
+        FsPath(args.track),
+        FsPath(args.out),
+        scale=args.scale,
+        tests_file=FsPath(args.tests) if args.tests else None,
+        quick=args.quick,
+    )
+    print(report)
+    return 0
+
+
+def _add_sim_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None:
+    sim = subcommands.add_parser(
+        "sim",
+        help="run one closed-loop simulation and write its time series, metrics and plots",
+        description=(
+            "Runs one closed-loop simulation (entirely in Rust) and writes OUT/timeseries.csv, "
+            "OUT/metrics.json (lateral/heading error, steering rate, lateral acceleration, settling, "
+            "overshoot, speed, distance; *_settled = after settling) and the plots trajectory.png, "
+            "lateral_error.png, heading_error.png, steering.png, speed.png."
+        ),
+    )
+    sim.add_argument(
+        "--track",
+        required=True,
+        metavar="TRACK",
+        help="a TUM csv file (x_m,y_m,w_tr_right_m,w_tr_left_m), straight[:LENGTH_M], circle:RADIUS_M or test_track",
+    )
+    sim.add_argument("--scale", type=_finite("scale", 0.0, strict=True), default=None, metavar="F", help="scale the track by F (> 0)")
+    sim.add_argument(
+        "--controller",
+        choices=["blend", "stanley", "pure-pursuit"],
+        default=None,
+        help="lateral law: the paper's blend (default), Stanley at the front axle, pure pursuit at the rear axle",
+    )
+    alpha = sim.add_mutually_exclusive_group()
+    alpha.add_argument(
+        "--alpha",
+        type=_finite("alpha", 0.0, high=1.0),
+        default=None,
+        metavar="A",
+        help="blend factor in [0, 1]: 0 = rear axle, 1 = front axle (default 0.5 or the config's)",
+    )
+    alpha.add_argument(
+        "--alpha-schedule",
+        default=None,
+        metavar="sine:OMEGA",
+        help="moving control point alpha(t) = 0.5 (sin(OMEGA t) + 1) (the paper uses sine:0.2)",
+    )
+    sim.add_argument("--direction", choices=["forward", "backward"], default=None, help="direction of travel (default forward)")
+    sim.add_argument("--speed", type=_finite("speed", 0.0, strict=True), default=None, metavar="V", help="preferred speed (m/s, > 0; default 3)")
+    sim.add_argument("--offset", type=_finite("offset"), default=4.0, metavar="M", help="initial lateral offset of the rear axle (m, > 0 left; default 4)")
+    sim.add_argument("--heading-error-deg", type=_finite("heading error"), default=0.0, metavar="DEG", help="initial heading error (deg; default 0)")
+    sim.add_argument(
+        "--noise",
+        default=None,
+        metavar="SPEC",
+        help="sensor noise on x, y, heading: uniform:POS_M[:HEADING_DEG] or walk:STEP_M:MAX_M[:HEADING_STEP_DEG:HEADING_MAX_DEG[:INTERVAL_S]] (default none)",
+    )
+    sim.add_argument("--delay", type=_finite("delay", 0.0), default=0.0, metavar="S", help="actuation delay (s, >= 0; default 0)")
+    length = sim.add_mutually_exclusive_group()
+    length.add_argument("--duration", type=_finite("duration", 0.0, strict=True), default=60.0, metavar="S", help="simulated time (s; default 60)")
+    length.add_argument("--laps", type=_finite("laps", 0.0, strict=True), default=None, metavar="N", help="stop after N laps of the track instead")
+    sim.add_argument("--dt", type=_finite("dt", 0.0, strict=True, high=1.0), default=0.01, metavar="S", help="time step (s, in (0, 1]; default 0.01)")
+    sim.add_argument("--config", default=None, metavar="FILE.toml", help="TOML file with [controller] and [vehicle] tables (flags override it)")
+    sim.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the sensor noise (default 0)")
+    sim.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
+    sim.set_defaults(run=_cmd_sim)
+
+
+def _add_paper_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None:
+    paper = subcommands.add_parser(
+        "paper",
+        help="reproduce the paper's experiments and write a report with figures",
+        description=(
+            "Reproduces the paper's experiments in simulation and writes OUT/report.md with its figures: "
+            "(1) pure pursuit vs Stanley vs the blended command on the scaled-down track from a 4 m offset, "
+            "with and without sensor noise and actuation delay; (2) the moving control point "
+            "alpha(t) = 0.5 (sin(0.2 t) + 1); (3) the six real-vehicle tests of configs/paper_real_tests.toml "
+            "on the built-in closed loop, with the paper's Table 2 next to ours."
+        ),
+    )
+    paper.add_argument("--track", required=True, metavar="FILE", help="the Nuerburgring TUM csv (e.g. ../shared/tracks/Nuerburgring.csv)")
+    paper.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
+    paper.add_argument(
+        "--scale",
+        type=_finite("scale", 0.0, strict=True),
+        default=None,
+        metavar="F",
+        help="scale of the track for experiments 1-2 (default: chosen so the tightest turn needs at most half the steering limit)",
+    )
+    paper.add_argument("--tests", default=None, metavar="FILE.toml", help="the six tests (default: configs/paper_real_tests.toml of this repository)")
+    paper.add_argument("--quick", action="store_true", help="shorter runs (a smoke test; the numbers are not the report's)")
+    paper.set_defaults(run=_cmd_paper)
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="blendtrack",
         description="Path tracking with dynamic control point blending.",
     )
-    subcommands = parser.add_subparsers(
-        dest="command", metavar="COMMAND", required=True
-    )
+    subcommands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     version = subcommands.add_parser("version", help="print the version and exit")
     version.set_defaults(run=_cmd_version)
-
+    _add_sim_parser(subcommands)
+    _add_paper_parser(subcommands)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Runs the CLI on ``argv`` (default: ``sys.argv[1:]``); returns the exit code."""
     args = _build_parser().parse_args(argv)
-    exit_code: int = args.run(args)
+    try:
+        exit_code: int = args.run(args)
+    except blendtrack.BlendtrackError as e:
+        message = " ".join(str(e).split())
+        print(f"blendtrack {args.command}: error: {message}", file=sys.stderr)
+        return 2
+    except OSError as e:
+        print(f"blendtrack {args.command}: error: {e}", file=sys.stderr)
+        return 2
     return exit_code
 
 

@@ -10,10 +10,18 @@
 //! is kept out of the workspace's default members so a bare `cargo test`
 //! stays Python-free. Every name registered here must also be declared in
 //! `python/blendtrack/_blendtrack.pyi` (checked by `mypy.stubtest`).
+//!
+//! Modules: `errors` (exception classes and core-error mapping), `path`
+//! (`Path`), `config` (`ControllerConfig`, `VehicleParams`, `load_config`),
+//! `sim` (`simulate`, `compute_metrics`), `fleet` (`Fleet`).
 
 use pyo3::prelude::*;
 
+mod config;
 mod errors;
+mod fleet;
+mod path;
+mod sim;
 
 /// The native module. Each submodule of this crate adds its own names
 /// through a `register` function, so this stays a list of one-liners.
@@ -21,5 +29,12 @@ mod errors;
 fn _blendtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
+    m.add_class::<path::Path>()?;
+    m.add_class::<config::ControllerConfig>()?;
+    m.add_class::<config::VehicleParams>()?;
+    m.add_function(wrap_pyfunction!(config::load_config, m)?)?;
+    m.add_function(wrap_pyfunction!(sim::simulate, m)?)?;
+    m.add_function(wrap_pyfunction!(sim::compute_metrics, m)?)?;
+    m.add_class::<fleet::Fleet>()?;
     Ok(())
 }

@@ -7,7 +7,8 @@
 //! `alpha` in [0, 1] ([`lateral`]), a curvature-aware longitudinal law built
 //! on virtual borders and a ray cast ([`longitudinal`]), the reference
 //! [`path`] they track, a kinematic bicycle [`vehicle`] with actuator limits,
-//! delay and sensor noise, and a closed-loop [`sim`]ulator. It knows nothing
+//! delay and sensor noise, a closed-loop [`sim`]ulator with its [`metrics`],
+//! and a batch [`fleet`] stepping many vehicles in one call. It knows nothing
 //! of Python or SUMO: the binding crate and the Python package build on it.
 //!
 //! Conventions (SPEC §1): SI units, world frame x east / y north, heading CCW
@@ -17,8 +18,10 @@
 pub mod config;
 pub mod controller;
 pub mod error;
+pub mod fleet;
 pub mod lateral;
 pub mod longitudinal;
+pub mod metrics;
 pub mod path;
 pub mod sim;
 pub mod vehicle;
@@ -26,8 +29,10 @@ pub mod vehicle;
 pub use config::{Config, ControllerConfig, Experiment, ExperimentSet, LateralKind};
 pub use controller::{ControlOutput, Controller, Track};
 pub use error::{ConfigError, Error, PathError, StateError};
+pub use fleet::{Fleet, FleetError, FleetInputs, FleetOutputs, NextStates};
 pub use lateral::AlphaSchedule;
 pub use longitudinal::{Corridor, Obstacle};
+pub use metrics::{run_metrics, trace_metrics, RunMetrics, Series, WindowMetrics};
 pub use path::{wrap_angle, Path, Projection, Widths};
 pub use sim::{simulate, SimOptions, Trace};
 pub use vehicle::{Command, Direction, NoiseModel, Sensor, Vehicle, VehicleParams, VehicleState};

@@ -1,0 +1,574 @@
+//! Batch control of many vehicles in one call per step (the SUMO plugin's unit).
+//!
+//! A [`Fleet`] keeps a registry of tracks (a path plus its virtual corridor,
+//! e.g. one per SUMO route) and of vehicles, each in a numbered slot with its
+//! own [`Controller`] (projection hints), configuration and vehicle limits.
+//! Vehicles come and go: [`Fleet::add_vehicle`] returns a slot number,
+//! [`Fleet::remove_vehicle`] frees it, and a freed number is handed out again
+//! by a later `add_vehicle` (lowest first), so callers map their own ids to
+//! slots and drop the mapping on removal.
+//!
+//! [`Fleet::step`] takes column arrays (one entry per listed slot, in any
+//! order): the measured state, an optional per-vehicle blend factor and the
+//! real obstacles (leader gap and speed, stop-line gap), and returns column
+//! arrays of commands and errors. With a time step it also integrates each
+//! vehicle's next state through the kinematic bicycle with its actuator
+//! limits (no delay line: the caller owns time), for callers that let
+//! blendtrack move the vehicles.
+//!
+//! Error policy (two levels, so one bad vehicle never spoils the others):
+//! - Errors of the CALL, detected before anything is stepped, reject the
+//!   whole step and change nothing: arrays of the wrong length (the error
+//!   names the argument), a slot that is not in use or appears twice (the
+//!   error names it), a non-positive or non-finite `dt`.
+//! - Errors of ONE VEHICLE's data: a non-finite state component or an alpha
+//!   outside [0, 1]. That vehicle gets `ok = false` and NaN in every output
+//!   column, its controller state (projection hints) is left as it was, and
+//!   every other vehicle is stepped normally.
+//!
+//! Obstacle columns use NaN or +inf for "none". A leader with a finite gap but
+//! a NaN speed is taken as standing still (the conservative reading).
+//! A NaN alpha means "use the vehicle's configured `lat_blend_factor`".
+
+use crate::config::{validate_vehicle, ControllerConfig};
+use crate::controller::{Controller, Track};
+use crate::error::ConfigError;
+use crate::longitudinal::Obstacle;
+use crate::path::Path;
+use crate::vehicle::{Command, Vehicle, VehicleParams, VehicleState};
+use std::sync::Arc;
+use thiserror::Error;
+
+/// An error of a whole fleet call (see the module docs for the policy).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum FleetError {
+    #[error("argument `{argument}` has {got} entries, expected {expected} (one per slot)")]
+    Length { argument: &'static str, expected: usize, got: usize },
+    #[error("slot {slot} is not in use (never added, or removed)")]
+    UnknownSlot { slot: i64 },
+    #[error("slot {slot} appears more than once in one step")]
+    DuplicateSlot { slot: i64 },
+    #[error("track id {track_id} is not registered")]
+    UnknownTrack { track_id: i64 },
+    #[error("argument `{name}` = {value}: {message}")]
+    Parameter { name: &'static str, value: f64, message: &'static str },
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+}
+
+/// One step's inputs: column arrays, entry `i` belongs to `slots[i]`.
+#[derive(Debug, Clone, Copy)]
+pub struct FleetInputs<'a> {
+    pub slots: &'a [i64],
+    pub x_m: &'a [f64],
+    pub y_m: &'a [f64],
+    pub theta_rad: &'a [f64],
+    /// Signed speed (m/s, < 0 backwards).
+    pub v_mps: &'a [f64],
+    pub delta_rad: &'a [f64],
+    /// Blend factor per vehicle (NaN = the vehicle's configured one).
+    pub alpha: Option<&'a [f64]>,
+    /// Gap to the leader along the path (m; NaN/inf = no leader).
+    pub leader_gap_m: Option<&'a [f64]>,
+    /// Leader speed along the direction of travel (m/s).
+    pub leader_speed_mps: Option<&'a [f64]>,
+    /// Gap to a stop line (m; NaN/inf = none).
+    pub stop_gap_m: Option<&'a [f64]>,
+    /// When given, the next state is integrated over this time step (s).
+    pub dt_s: Option<f64>,
+}
+
+impl<'a> FleetInputs<'a> {
+    /// Inputs with no alpha, obstacles or time step.
+    pub fn new(slots: &'a [i64], x_m: &'a [f64], y_m: &'a [f64], theta_rad: &'a [f64], v_mps: &'a [f64], delta_rad: &'a [f64]) -> Self {
+        FleetInputs { slots, x_m, y_m, theta_rad, v_mps, delta_rad, alpha: None, leader_gap_m: None, leader_speed_mps: None, stop_gap_m: None, dt_s: None }
+    }
+}
+
+/// One step's outputs, one entry per input slot, in the input order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FleetOutputs {
+    /// False where the vehicle's inputs were unusable (its outputs are NaN).
+    pub ok: Vec<bool>,
+    pub steering_rad: Vec<f64>,
+    /// Acceleration command along the direction of travel (before vehicle limits).
+    pub accel_mps2: Vec<f64>,
+    /// Blend factor used.
+    pub alpha: Vec<f64>,
+    /// Errors of the control point P(alpha).
+    pub lateral_error_m: Vec<f64>,
+    pub heading_error_rad: Vec<f64>,
+    pub s_m: Vec<f64>,
+    pub curvature_per_m: Vec<f64>,
+    /// Distance to the virtual obstacle (m, +inf on free road).
+    pub virtual_obstacle_m: Vec<f64>,
+    /// The integrated next state, when a time step was given.
+    pub next: Option<NextStates>,
+}
+
+/// Next states after `dt` (columns; NaN where `ok` is false).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct NextStates {
+    pub x_m: Vec<f64>,
+    pub y_m: Vec<f64>,
+    pub theta_rad: Vec<f64>,
+    pub v_mps: Vec<f64>,
+    pub delta_rad: Vec<f64>,
+}
+
+#[derive(Debug, Clone)]
+struct Entry {
+    track_id: usize,
+    controller: Controller,
+    params: VehicleParams,
+}
+
+#[derive(Debug, Clone)]
+struct TrackEntry {
+    track: Arc<Track>,
+    config: ControllerConfig,
+}
+
+/// Tracks and vehicles stepped together (see the module docs).
+#[derive(Debug, Clone, Default)]
+pub struct Fleet {
+    tracks: Vec<TrackEntry>,
+    slots: Vec<Option<Entry>>,
+    n_active: usize,
+    /// Per-slot "seen in this step" marks, kept to avoid a per-step allocation.
+    seen: Vec<u32>,
+    epoch: u32,
+}
+
+impl Fleet {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Registers a track; `config` builds its corridor and is the default
+    /// configuration of the vehicles added to it. Returns the track id.
+    pub fn add_track(&mut self, path: Path, config: ControllerConfig) -> Result<usize, FleetError> {
+        config.validate()?;
+        let track = Arc::new(Track::new(path, &config));
+        self.tracks.push(TrackEntry { track, config });
+        Ok(self.tracks.len() - 1)
+    }
+
+    pub fn n_tracks(&self) -> usize {
+        self.tracks.len()
+    }
+
+    /// The track registered under `track_id`.
+    pub fn track(&self, track_id: i64) -> Result<&Arc<Track>, FleetError> {
+        self.track_entry(track_id).map(|t| &t.track)
+    }
+
+    fn track_entry(&self, track_id: i64) -> Result<&TrackEntry, FleetError> {
+        usize::try_from(track_id).ok().and_then(|i| self.tracks.get(i)).ok_or(FleetError::UnknownTrack { track_id })
+    }
+
+    /// Adds a vehicle on a track; `config` (default: the track's) and
+    /// `params` (default: [`VehicleParams::default`]) are validated. Returns
+    /// its slot, the lowest free one.
+    pub fn add_vehicle(&mut self, track_id: i64, config: Option<ControllerConfig>, params: Option<VehicleParams>) -> Result<usize, FleetError> {
+        let t = self.track_entry(track_id)?;
+        let cfg = config.unwrap_or_else(|| t.config.clone());
+        let params = params.unwrap_or_default();
+        validate_vehicle(&params)?;
+        let controller = Controller::new(t.track.clone(), cfg, &params)?;
+        let entry = Entry { track_id: track_id as usize, controller, params };
+        let slot = match self.slots.iter().position(Option::is_none) {
+            Some(i) => {
+                self.slots[i] = Some(entry);
+                i
+            }
+            None => {
+                self.slots.push(Some(entry));
+                self.seen.push(0);
+                self.slots.len() - 1
+            }
+        };
+        self.n_active += 1;
+        Ok(slot)
+    }
+
+    /// Frees a slot.
+    pub fn remove_vehicle(&mut self, slot: i64) -> Result<(), FleetError> {
+        let i = self.index(slot)?;
+        self.slots[i] = None;
+        self.n_active -= 1;
+        Ok(())
+    }
+
+    fn index(&self, slot: i64) -> Result<usize, FleetError> {
+        usize::try_from(slot).ok().filter(|&i| self.slots.get(i).is_some_and(Option::is_some)).ok_or(FleetError::UnknownSlot { slot })
+    }
+
+    fn entry(&self, slot: i64) -> Result<&Entry, FleetError> {
+        let i = self.index(slot)?;
+        Ok(self.slots[i].as_ref().expect("index() checked the slot is in use"))
+    }
+
+    /// Number of vehicles in use.
+    pub fn len(&self) -> usize {
+        self.n_active
+    }
+    pub fn is_empty(&self) -> bool {
+        self.n_active == 0
+    }
+
+    /// Slots in use, ascending.
+    pub fn slots(&self) -> Vec<usize> {
+        self.slots.iter().enumerate().filter_map(|(i, e)| e.as_ref().map(|_| i)).collect()
+    }
+
+    pub fn vehicle_track(&self, slot: i64) -> Result<usize, FleetError> {
+        Ok(self.entry(slot)?.track_id)
+    }
+    pub fn vehicle_config(&self, slot: i64) -> Result<&ControllerConfig, FleetError> {
+        Ok(self.entry(slot)?.controller.config())
+    }
+    pub fn vehicle_params(&self, slot: i64) -> Result<&VehicleParams, FleetError> {
+        Ok(&self.entry(slot)?.params)
+    }
+
+    /// Replaces a vehicle's configuration (validated). Its projection hints
+    /// are dropped (the next step searches the whole track once); the
+    /// corridor stays the track's.
+    pub fn set_vehicle_config(&mut self, slot: i64, config: ControllerConfig) -> Result<(), FleetError> {
+        let i = self.index(slot)?;
+        let e = self.slots[i].as_mut().expect("index() checked the slot is in use");
+        e.controller = Controller::new(e.controller.track().clone(), config, &e.params)?;
+        Ok(())
+    }
+
+    /// Forgets a vehicle's projection hints (after a teleport: the next step
+    /// searches its whole track).
+    pub fn reset_vehicle(&mut self, slot: i64) -> Result<(), FleetError> {
+        let i = self.index(slot)?;
+        self.slots[i].as_mut().expect("index() checked the slot is in use").controller.reset();
+        Ok(())
+    }
+
+    /// Checks the call (lengths, slots, dt) before anything moves.
+    fn check(&mut self, inp: &FleetInputs<'_>) -> Result<(), FleetError> {
+        let n = inp.slots.len();
+        let cols: [(&'static str, Option<&[f64]>); 9] = [
+            ("x", Some(inp.x_m)),
+            ("y", Some(inp.y_m)),
+            ("theta", Some(inp.theta_rad)),
+            ("v", Some(inp.v_mps)),
+            ("delta", Some(inp.delta_rad)),
+            ("alpha", inp.alpha),
+            ("leader_gap", inp.leader_gap_m),
+            ("leader_speed", inp.leader_speed_mps),
+            ("stop_gap", inp.stop_gap_m),
+        ];
+        for (argument, col) in cols {
+            if let Some(c) = col {
+                if c.len() != n {
+                    return Err(FleetError::Length { argument, expected: n, got: c.len() });
+                }
+            }
+        }
+        if let Some(dt) = inp.dt_s {
+            if !(dt.is_finite() && dt > 0.0) {
+                return Err(FleetError::Parameter { name: "dt", value: dt, message: "must be finite and > 0" });
+            }
+        }
+        self.epoch = self.epoch.wrapping_add(1);
+        if self.epoch == 0 {
+            self.seen.iter_mut().for_each(|s| *s = 0);
+            self.epoch = 1;
+        }
+        for &slot in inp.slots {
+            let i = self.index(slot)?;
+            if self.seen[i] == self.epoch {
+                return Err(FleetError::DuplicateSlot { slot });
+            }
+            self.seen[i] = self.epoch;
+        }
+        Ok(())
+    }
+
+    /// Steps the listed vehicles once (see the module docs). Large batches
+    /// are split over the available cores (scoped threads); each vehicle's
+    /// result does not depend on the split.
+    pub fn step(&mut self, inp: &FleetInputs<'_>) -> Result<FleetOutputs, FleetError> {
+        self.check(inp)?;
+        let n = inp.slots.len();
+        // One &mut per listed slot, in input order (slots are unique: checked).
+        let mut by_slot: Vec<Option<&mut Entry>> = self.slots.iter_mut().map(Option::as_mut).collect();
+        let mut entries: Vec<&mut Entry> = inp.slots.iter().map(|&s| by_slot[s as usize].take().expect("check() verified every slot once")).collect();
+        let mut rows = vec![Row::default(); n];
+        let threads = if n >= PARALLEL_MIN_VEHICLES { std::thread::available_parallelism().map_or(1, |p| p.get()).min(MAX_THREADS) } else { 1 };
+        if threads <= 1 {
+            for (i, (e, row)) in entries.iter_mut().zip(rows.iter_mut()).enumerate() {
+                *row = step_one(e, inp, i);
+            }
+        } else {
+            let chunk = n.div_ceil(threads);
+            std::thread::scope(|scope| {
+                for (c, (es, rs)) in entries.chunks_mut(chunk).zip(rows.chunks_mut(chunk)).enumerate() {
+                    scope.spawn(move || {
+                        for (j, (e, row)) in es.iter_mut().zip(rs.iter_mut()).enumerate() {
+                            *row = step_one(e, inp, c * chunk + j);
+                        }
+                    });
+                }
+            });
+        }
+        let col = |f: fn(&Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
+        Ok(FleetOutputs {
+            ok: rows.iter().map(|r| r.ok).collect(),
+            steering_rad: col(|r| r.steering_rad),
+            accel_mps2: col(|r| r.accel_mps2),
+            alpha: col(|r| r.alpha),
+            lateral_error_m: col(|r| r.lateral_error_m),
+            heading_error_rad: col(|r| r.heading_error_rad),
+            s_m: col(|r| r.s_m),
+            curvature_per_m: col(|r| r.curvature_per_m),
+            virtual_obstacle_m: col(|r| r.virtual_obstacle_m),
+            next: inp.dt_s.map(|_| NextStates {
+                x_m: col(|r| r.next.x_m),
+                y_m: col(|r| r.next.y_m),
+                theta_rad: col(|r| r.next.theta_rad),
+                v_mps: col(|r| r.next.v_mps),
+                delta_rad: col(|r| r.next.delta_rad),
+            }),
+        })
+    }
+}
+
+/// Below this many vehicles a step runs on the calling thread only.
+const PARALLEL_MIN_VEHICLES: usize = 2048;
+const MAX_THREADS: usize = 8;
+
+/// One vehicle's outputs.
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    ok: bool,
+    steering_rad: f64,
+    accel_mps2: f64,
+    alpha: f64,
+    lateral_error_m: f64,
+    heading_error_rad: f64,
+    s_m: f64,
+    curvature_per_m: f64,
+    virtual_obstacle_m: f64,
+    next: VehicleState,
+}
+
+impl Default for Row {
+    fn default() -> Self {
+        let nan = f64::NAN;
+        Row {
+            ok: false,
+            steering_rad: nan,
+            accel_mps2: nan,
+            alpha: nan,
+            lateral_error_m: nan,
+            heading_error_rad: nan,
+            s_m: nan,
+            curvature_per_m: nan,
+            virtual_obstacle_m: nan,
+            next: VehicleState { x_m: nan, y_m: nan, theta_rad: nan, v_mps: nan, delta_rad: nan },
+        }
+    }
+}
+
+/// Steps entry `e` with input row `i`; an unusable input gives the NaN row.
+fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
+    let opt = |c: Option<&[f64]>| c.map_or(f64::NAN, |c| c[i]);
+    let state = VehicleState { x_m: inp.x_m[i], y_m: inp.y_m[i], theta_rad: inp.theta_rad[i], v_mps: inp.v_mps[i], delta_rad: inp.delta_rad[i] };
+    let a = opt(inp.alpha);
+    let alpha = if a.is_nan() { e.controller.config().lat_blend_factor } else { a };
+    let mut obstacles = [Obstacle { gap_m: 0.0, speed_mps: 0.0 }; 2];
+    let mut n_obs = 0;
+    let gap = opt(inp.leader_gap_m);
+    if gap.is_finite() {
+        let vl = opt(inp.leader_speed_mps);
+        obstacles[n_obs] = Obstacle { gap_m: gap, speed_mps: if vl.is_finite() { vl.max(0.0) } else { 0.0 } };
+        n_obs += 1;
+    }
+    let stop = opt(inp.stop_gap_m);
+    if stop.is_finite() {
+        obstacles[n_obs] = Obstacle { gap_m: stop, speed_mps: 0.0 };
+        n_obs += 1;
+    }
+    let Ok(o) = e.controller.step_with_alpha(&state, alpha, &obstacles[..n_obs]) else {
+        return Row::default();
+    };
+    let next = match inp.dt_s {
+        Some(dt) => {
+            let mut veh = Vehicle::new(state, e.params, e.controller.config().direction, 0);
+            veh.step(Command { steering_rad: o.steering_rad, accel_mps2: o.accel_mps2 }, dt);
+            veh.state
+        }
+        None => Row::default().next,
+    };
+    Row {
+        ok: true,
+        steering_rad: o.steering_rad,
+        accel_mps2: o.accel_mps2,
+        alpha: o.alpha,
+        lateral_error_m: o.lateral_error_m,
+        heading_error_rad: o.heading_error_rad,
+        s_m: o.s_m,
+        curvature_per_m: o.curvature_per_m,
+        virtual_obstacle_m: o.virtual_obstacle_m,
+        next,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vehicle::Direction;
+
+    fn fleet_with(n: usize) -> (Fleet, Vec<i64>) {
+        let mut f = Fleet::new();
+        let a = f.add_track(Path::test_track(2.0).unwrap(), ControllerConfig::default()).unwrap();
+        let b = f.add_track(Path::circle(40.0, 1e-3).unwrap(), ControllerConfig { path_width_m: 6.0, ..Default::default() }).unwrap();
+        let slots = (0..n)
+            .map(|i| {
+                let t = if i % 2 == 0 { a } else { b } as i64;
+                let cfg = (i % 3 == 0).then(|| ControllerConfig { lat_blend_factor: 0.2, ..f.tracks[t as usize].config.clone() });
+                f.add_vehicle(t, cfg, None).unwrap() as i64
+            })
+            .collect();
+        (f, slots)
+    }
+
+    fn states(n: usize, k: usize) -> Vec<VehicleState> {
+        (0..n).map(|i| VehicleState { x_m: 1.0 + 0.1 * i as f64 + 0.3 * k as f64, y_m: 2.0 - 0.05 * i as f64, theta_rad: 0.05 * i as f64, v_mps: 3.0, delta_rad: 0.01 }).collect()
+    }
+
+    fn cols(s: &[VehicleState]) -> [Vec<f64>; 5] {
+        [s.iter().map(|s| s.x_m).collect(), s.iter().map(|s| s.y_m).collect(), s.iter().map(|s| s.theta_rad).collect(), s.iter().map(|s| s.v_mps).collect(), s.iter().map(|s| s.delta_rad).collect()]
+    }
+
+    #[test]
+    fn batch_equals_single_controllers() {
+        let n = 7;
+        let (mut f, slots) = fleet_with(n);
+        // Reference: one Controller per vehicle, stepped one at a time.
+        let mut singles: Vec<(Controller, VehicleParams)> = slots
+            .iter()
+            .map(|&s| {
+                let e = f.entry(s).unwrap();
+                (Controller::new(e.controller.track().clone(), e.controller.config().clone(), &e.params).unwrap(), e.params)
+            })
+            .collect();
+        for k in 0..5 {
+            let st = states(n, k);
+            let [x, y, th, v, d] = cols(&st);
+            let gaps: Vec<f64> = (0..n).map(|i| if i == 2 { 2.0 } else { f64::NAN }).collect();
+            let lspeed = vec![1.0; n];
+            let inp = FleetInputs { leader_gap_m: Some(&gaps), leader_speed_mps: Some(&lspeed), dt_s: Some(0.1), ..FleetInputs::new(&slots, &x, &y, &th, &v, &d) };
+            let out = f.step(&inp).unwrap();
+            for i in 0..n {
+                let (c, p) = &mut singles[i];
+                let obs: Vec<Obstacle> = if i == 2 { vec![Obstacle { gap_m: 2.0, speed_mps: 1.0 }] } else { vec![] };
+                let o = c.step(&st[i], &obs).unwrap();
+                assert!(out.ok[i]);
+                assert_eq!(out.steering_rad[i], o.steering_rad);
+                assert_eq!(out.accel_mps2[i], o.accel_mps2);
+                assert_eq!(out.lateral_error_m[i], o.lateral_error_m);
+                assert_eq!(out.s_m[i], o.s_m);
+                let mut veh = Vehicle::new(st[i], *p, Direction::Forward, 0);
+                veh.step(Command { steering_rad: o.steering_rad, accel_mps2: o.accel_mps2 }, 0.1);
+                let next = out.next.as_ref().unwrap();
+                assert_eq!((next.x_m[i], next.theta_rad[i], next.v_mps[i]), (veh.state.x_m, veh.state.theta_rad, veh.state.v_mps));
+            }
+            // A slower leader 2 m ahead makes vehicle 2 brake (3 m/s, tau = 1 s).
+            assert!(out.accel_mps2[2] < -1.0, "{}", out.accel_mps2[2]);
+        }
+    }
+
+    #[test]
+    fn bad_vehicle_is_flagged_and_others_unaffected() {
+        let n = 4;
+        let (mut f, slots) = fleet_with(n);
+        let (mut g, _) = fleet_with(n);
+        let st = states(n, 0);
+        let [x, y, mut th, v, d] = cols(&st);
+        let [x2, y2, th2, v2, d2] = cols(&st);
+        th[1] = f64::NAN;
+        let alpha = vec![f64::NAN, 0.5, 2.0, 0.7];
+        let out = f.step(&FleetInputs { alpha: Some(&alpha), dt_s: Some(0.05), ..FleetInputs::new(&slots, &x, &y, &th, &v, &d) }).unwrap();
+        assert_eq!(out.ok, vec![true, false, false, true]);
+        assert!(out.steering_rad[1].is_nan() && out.next.as_ref().unwrap().x_m[2].is_nan());
+        // NaN alpha = the configured one (slot 0 was added with 0.2).
+        assert_eq!(out.alpha[0], 0.2);
+        assert_eq!(out.alpha[3], 0.7);
+        let good = [0usize, 3];
+        let sl: Vec<i64> = good.iter().map(|&i| slots[i]).collect();
+        let pick = |c: &[f64]| good.iter().map(|&i| c[i]).collect::<Vec<f64>>();
+        let ref_out = g
+            .step(&FleetInputs { alpha: Some(&pick(&alpha)), dt_s: Some(0.05), ..FleetInputs::new(&sl, &pick(&x2), &pick(&y2), &pick(&th2), &pick(&v2), &pick(&d2)) })
+            .unwrap();
+        assert_eq!(pick(&out.steering_rad), ref_out.steering_rad);
+        assert_eq!(pick(&out.next.as_ref().unwrap().y_m), ref_out.next.unwrap().y_m);
+    }
+
+    #[test]
+    fn call_errors_name_the_argument_or_slot_and_change_nothing() {
+        let (mut f, slots) = fleet_with(3);
+        let st = states(3, 0);
+        let [x, y, th, v, d] = cols(&st);
+        let short = vec![0.0; 2];
+        let e = f.step(&FleetInputs::new(&slots, &x, &short, &th, &v, &d)).unwrap_err();
+        assert_eq!(e, FleetError::Length { argument: "y", expected: 3, got: 2 });
+        assert!(e.to_string().contains("`y`"));
+        let e = f.step(&FleetInputs { stop_gap_m: Some(&short), ..FleetInputs::new(&slots, &x, &y, &th, &v, &d) }).unwrap_err();
+        assert!(e.to_string().contains("stop_gap"), "{e}");
+        let bad = vec![slots[0], 99, slots[2]];
+        assert_eq!(f.step(&FleetInputs::new(&bad, &x, &y, &th, &v, &d)).unwrap_err(), FleetError::UnknownSlot { slot: 99 });
+        let neg = vec![slots[0], -1, slots[2]];
+        assert!(f.step(&FleetInputs::new(&neg, &x, &y, &th, &v, &d)).unwrap_err().to_string().contains("slot -1"));
+        let dup = vec![slots[0], slots[1], slots[0]];
+        assert_eq!(f.step(&FleetInputs::new(&dup, &x, &y, &th, &v, &d)).unwrap_err(), FleetError::DuplicateSlot { slot: slots[0] });
+        let e = f.step(&FleetInputs { dt_s: Some(-0.1), ..FleetInputs::new(&slots, &x, &y, &th, &v, &d) }).unwrap_err();
+        assert!(e.to_string().contains("dt"));
+        // A rejected call did not advance any controller: the same call on a
+        // fresh twin gives the same answer.
+        let (mut g, _) = fleet_with(3);
+        let a = f.step(&FleetInputs::new(&slots, &x, &y, &th, &v, &d)).unwrap();
+        let b = g.step(&FleetInputs::new(&slots, &x, &y, &th, &v, &d)).unwrap();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn slots_are_reused_and_removed_slots_are_unknown() {
+        let (mut f, slots) = fleet_with(4);
+        assert_eq!(f.len(), 4);
+        f.remove_vehicle(slots[1]).unwrap();
+        assert_eq!(f.remove_vehicle(slots[1]).unwrap_err(), FleetError::UnknownSlot { slot: slots[1] });
+        assert_eq!(f.slots(), vec![0, 2, 3]);
+        assert_eq!(f.add_vehicle(1, None, None).unwrap(), 1);
+        assert_eq!(f.vehicle_track(1).unwrap(), 1);
+        assert_eq!(f.add_vehicle(5, None, None).unwrap_err(), FleetError::UnknownTrack { track_id: 5 });
+        let bad = ControllerConfig { lat_blend_factor: 1.5, ..Default::default() };
+        assert!(f.add_vehicle(0, Some(bad.clone()), None).unwrap_err().to_string().contains("lat_blend_factor"));
+        assert!(f.set_vehicle_config(0, bad).is_err());
+        f.set_vehicle_config(0, ControllerConfig { lat_blend_factor: 0.9, ..Default::default() }).unwrap();
+        assert_eq!(f.vehicle_config(0).unwrap().lat_blend_factor, 0.9);
+        assert_eq!(f.len(), 4);
+        // A batch large enough to be split over threads equals the serial one.
+        let n = 3 * PARALLEL_MIN_VEHICLES / 2;
+        let (mut big, big_slots) = fleet_with(n);
+        let st = states(n, 1);
+        let [x, y, th, v, d] = cols(&st);
+        let par = big.step(&FleetInputs { dt_s: Some(0.1), ..FleetInputs::new(&big_slots, &x, &y, &th, &v, &d) }).unwrap();
+        let (mut small, small_slots) = fleet_with(n);
+        for i in (0..n).step_by(97) {
+            let one = small.step(&FleetInputs { dt_s: Some(0.1), ..FleetInputs::new(&small_slots[i..i + 1], &x[i..i + 1], &y[i..i + 1], &th[i..i + 1], &v[i..i + 1], &d[i..i + 1]) }).unwrap();
+            assert_eq!(par.steering_rad[i], one.steering_rad[0]);
+            assert_eq!(par.next.as_ref().unwrap().theta_rad[i], one.next.as_ref().unwrap().theta_rad[0]);
+        }
+        // Empty step is fine.
+        let out = f.step(&FleetInputs::new(&[], &[], &[], &[], &[], &[])).unwrap();
+        assert!(out.ok.is_empty());
+    }
+}

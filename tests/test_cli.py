@@ -1,0 +1,134 @@
+"""`blendtrack sim` and `blendtrack paper` end to end (subprocesses)."""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from blendtrack.simulation import METRIC_KEYS
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+TRACKS = REPO_ROOT.parent / "shared" / "tracks"
+NUERBURGRING = TRACKS / "Nuerburgring.csv"
+needs_nuerburgring = pytest.mark.skipif(not NUERBURGRING.is_file(), reason=f"{NUERBURGRING} is absent (shared/ track data not beside the repo)")
+PLOTS = ["trajectory.png", "lateral_error.png", "heading_error.png", "steering.png", "speed.png"]
+
+
+def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "blendtrack.cli", *args], capture_output=True, text=True, timeout=timeout, check=False)
+
+
+def _check_outputs(out: Path) -> dict[str, float]:
+    with open(out / "metrics.json") as f:
+        metrics = json.load(f)
+    assert list(metrics) == list(METRIC_KEYS)
+    assert set(metrics) == {
+        "lateral_error_mean_abs_m", "lateral_error_rms_m", "lateral_error_max_abs_m", "heading_error_rms_deg",
+        "steering_rate_rms_deg_s", "steering_rate_max_deg_s", "lateral_accel_max_mps2", "settling_time_s",
+        "overshoot_m", "mean_speed_mps", "distance_m", "lateral_error_mean_abs_m_settled",
+        "lateral_error_rms_m_settled", "lateral_error_max_abs_m_settled", "heading_error_rms_deg_settled",
+    }  # fmt: skip
+    for key, value in metrics.items():
+        assert isinstance(value, float) and math.isfinite(value), (key, value)
+    header = (out / "timeseries.csv").read_text().splitlines()[0].split(",")
+    assert {"t_s", "x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "alpha", "s_m", "lateral_error_m", "heading_error_rad", "accel_mps2", "virtual_obstacle_m"} <= set(header)
+    for name in PLOTS:
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    return metrics
+
+
+def test_sim_on_a_builtin_track(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    r = _cli("sim", "--track", "test_track", "--duration", "60", "--offset", "2", "--noise", "uniform:0.02:0.2", "--delay", "0.05", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    m = _check_outputs(out)
+    assert m["lateral_error_max_abs_m"] >= 1.9  # the 2 m start is in the run
+    assert m["lateral_error_mean_abs_m_settled"] < 0.1
+    rows = (out / "timeseries.csv").read_text().count("\n") - 1
+    assert rows == 6000
+
+
+def test_sim_backward_stanley_on_a_circle_with_a_config_file(tmp_path: Path) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[controller]\nstanley_gain = 2.0\n[vehicle]\nwheelbase_m = 3.0\n")
+    r = _cli("sim", "--track", "circle:40", "--controller", "stanley", "--direction", "backward", "--speed", "1", "--offset", "1", "--duration", "40", "--config", str(cfg), "--out", str(tmp_path / "o"))
+    assert r.returncode == 0, r.stderr
+    frame_head = (tmp_path / "o" / "timeseries.csv").read_text().splitlines()[1]
+    assert float(frame_head.split(",")[4]) <= 0.0  # v < 0: backwards
+
+
+@needs_nuerburgring
+def test_sim_on_the_nuerburgring(tmp_path: Path) -> None:
+    out = tmp_path / "n"
+    r = _cli("sim", "--track", str(NUERBURGRING), "--scale", "0.45", "--speed", "8", "--alpha-schedule", "sine:0.2", "--duration", "120", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    m = _check_outputs(out)
+    assert m["distance_m"] > 500
+
+
+@needs_nuerburgring
+def test_paper_report(tmp_path: Path) -> None:
+    out = tmp_path / "paper"
+    r = _cli("paper", "--track", str(NUERBURGRING), "--out", str(out), "--quick")
+    assert r.returncode == 0, r.stderr
+    report = (out / "report.md").read_text()
+    for paper_value in ("0.043", "0.042", "0.026", "0.050", "0.049", "0.260"):
+        assert paper_value in report
+    for line in report.splitlines():
+        if line.startswith("![]("):
+            assert (out / line[4:-1]).is_file(), line
+    assert "Where our numbers differ" in report
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--track", "no-such-track"], "unknown track"),
+        (["--track", "/nonexistent/track.csv"], "cannot read track file"),
+        (["--track", "test_track", "--alpha", "1.5"], "alpha"),
+        (["--track", "test_track", "--alpha", "-0.1"], "alpha"),
+        (["--track", "test_track", "--dt", "-0.01"], "dt"),
+        (["--track", "test_track", "--dt", "abc"], "dt"),
+        (["--track", "test_track", "--scale", "0"], "scale"),
+        (["--track", "circle:-5"], "radius"),
+        (["--track", "test_track", "--noise", "gauss:1"], "noise"),
+        (["--track", "test_track", "--config", "/nonexistent.toml"], "config"),
+        (["--track", "test_track", "--alpha", "0.3", "--alpha-schedule", "sine:0.2"], "not allowed"),
+        (["--track", "test_track", "--controller", "mpc"], "controller"),
+    ],
+)
+def test_bad_sim_arguments_are_one_line_errors(tmp_path: Path, args: list[str], needle: str) -> None:
+    r = _cli("sim", *args, "--out", str(tmp_path / "o"), timeout=60)
+    assert r.returncode == 2, (r.stdout, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    assert needle in lines[0] and "Traceback" not in r.stderr
+
+
+def test_bad_config_contents_are_one_line_errors(tmp_path: Path) -> None:
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[controller]\nlat_blend_factr = 0.2\n")
+    r = _cli("sim", "--track", "test_track", "--config", str(cfg), "--out", str(tmp_path / "o"), timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "lat_blend_factr" in r.stderr
+
+
+def test_paper_with_a_missing_track_is_a_one_line_error(tmp_path: Path) -> None:
+    r = _cli("paper", "--track", str(tmp_path / "none.csv"), "--out", str(tmp_path / "o"), timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("command", ["sim", "paper"])
+def test_help_documents_every_option(command: str) -> None:
+    r = _cli(command, "--help", timeout=60)
+    assert r.returncode == 0
+    flags = {
+        "sim": ["--track", "--scale", "--controller", "--alpha", "--alpha-schedule", "--direction", "--speed", "--offset", "--noise", "--delay", "--duration", "--laps", "--dt", "--config", "--seed", "--out"],
+        "paper": ["--track", "--out", "--scale", "--tests", "--quick"],
+    }[command]
+    for flag in flags:
+        assert flag in r.stdout, flag
