@@ -12,7 +12,7 @@ use crate::error::{ConfigError, StateError};
 use crate::lateral::{
     blend, pure_pursuit_command, rear_command, stanley_command, travel_heading, LateralGains,
 };
-use crate::longitudinal::{longitudinal_accel, Corridor, Obstacle};
+use crate::longitudinal::{longitudinal_accel, relevance_distance, Corridor, Obstacle};
 use crate::path::{wrap_angle, Path};
 use crate::vehicle::{VehicleParams, VehicleState};
 use nalgebra::Point2;
@@ -53,7 +53,9 @@ pub struct ControlOutput {
     pub heading_error_rad: f64,
     /// Path curvature at the control point's foot.
     pub curvature_per_m: f64,
-    /// Distance to the virtual obstacle (m), +inf on free road.
+    /// Distance to the virtual obstacle (m); +inf on free road and when the
+    /// first border crossing lies beyond the distance at which it could change
+    /// the command ([`crate::longitudinal::relevance_distance`] plus the corridor width).
     pub virtual_obstacle_m: f64,
 }
 
@@ -198,10 +200,14 @@ impl Controller {
         self.hint_cp = Some(cp.s);
         let th_travel = travel_heading(measured.theta_rad, dir);
 
-        let d_obs =
-            self.track
-                .corridor
-                .ray_cast(path, &rear_pt, th_travel, rear.s, self.cfg.ray_horizon_m);
+        // Crossings beyond the relevance distance cannot change the command.
+        let horizon = self.cfg.ray_horizon_m.min(
+            relevance_distance(speed, &self.cfg) + 2.0 * self.track.corridor.max_width() + 5.0,
+        );
+        let d_obs = self
+            .track
+            .corridor
+            .ray_cast(path, &rear_pt, th_travel, rear.s, horizon);
         let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
         Ok(ControlOutput {
             steering_rad: steering,

@@ -43,7 +43,11 @@ use thiserror::Error;
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum FleetError {
     #[error("argument `{argument}` has {got} entries, expected {expected} (one per slot)")]
-    Length { argument: &'static str, expected: usize, got: usize },
+    Length {
+        argument: &'static str,
+        expected: usize,
+        got: usize,
+    },
     #[error("slot {slot} is not in use (never added, or removed)")]
     UnknownSlot { slot: i64 },
     #[error("slot {slot} appears more than once in one step")]
@@ -51,7 +55,11 @@ pub enum FleetError {
     #[error("track id {track_id} is not registered")]
     UnknownTrack { track_id: i64 },
     #[error("argument `{name}` = {value}: {message}")]
-    Parameter { name: &'static str, value: f64, message: &'static str },
+    Parameter {
+        name: &'static str,
+        value: f64,
+        message: &'static str,
+    },
     #[error(transparent)]
     Config(#[from] ConfigError),
 }
@@ -80,8 +88,27 @@ pub struct FleetInputs<'a> {
 
 impl<'a> FleetInputs<'a> {
     /// Inputs with no alpha, obstacles or time step.
-    pub fn new(slots: &'a [i64], x_m: &'a [f64], y_m: &'a [f64], theta_rad: &'a [f64], v_mps: &'a [f64], delta_rad: &'a [f64]) -> Self {
-        FleetInputs { slots, x_m, y_m, theta_rad, v_mps, delta_rad, alpha: None, leader_gap_m: None, leader_speed_mps: None, stop_gap_m: None, dt_s: None }
+    pub fn new(
+        slots: &'a [i64],
+        x_m: &'a [f64],
+        y_m: &'a [f64],
+        theta_rad: &'a [f64],
+        v_mps: &'a [f64],
+        delta_rad: &'a [f64],
+    ) -> Self {
+        FleetInputs {
+            slots,
+            x_m,
+            y_m,
+            theta_rad,
+            v_mps,
+            delta_rad,
+            alpha: None,
+            leader_gap_m: None,
+            leader_speed_mps: None,
+            stop_gap_m: None,
+            dt_s: None,
+        }
     }
 }
 
@@ -164,19 +191,31 @@ impl Fleet {
     }
 
     fn track_entry(&self, track_id: i64) -> Result<&TrackEntry, FleetError> {
-        usize::try_from(track_id).ok().and_then(|i| self.tracks.get(i)).ok_or(FleetError::UnknownTrack { track_id })
+        usize::try_from(track_id)
+            .ok()
+            .and_then(|i| self.tracks.get(i))
+            .ok_or(FleetError::UnknownTrack { track_id })
     }
 
     /// Adds a vehicle on a track; `config` (default: the track's) and
     /// `params` (default: [`VehicleParams::default`]) are validated. Returns
     /// its slot, the lowest free one.
-    pub fn add_vehicle(&mut self, track_id: i64, config: Option<ControllerConfig>, params: Option<VehicleParams>) -> Result<usize, FleetError> {
+    pub fn add_vehicle(
+        &mut self,
+        track_id: i64,
+        config: Option<ControllerConfig>,
+        params: Option<VehicleParams>,
+    ) -> Result<usize, FleetError> {
         let t = self.track_entry(track_id)?;
         let cfg = config.unwrap_or_else(|| t.config.clone());
         let params = params.unwrap_or_default();
         validate_vehicle(&params)?;
         let controller = Controller::new(t.track.clone(), cfg, &params)?;
-        let entry = Entry { track_id: track_id as usize, controller, params };
+        let entry = Entry {
+            track_id: track_id as usize,
+            controller,
+            params,
+        };
         let slot = match self.slots.iter().position(Option::is_none) {
             Some(i) => {
                 self.slots[i] = Some(entry);
@@ -201,12 +240,17 @@ impl Fleet {
     }
 
     fn index(&self, slot: i64) -> Result<usize, FleetError> {
-        usize::try_from(slot).ok().filter(|&i| self.slots.get(i).is_some_and(Option::is_some)).ok_or(FleetError::UnknownSlot { slot })
+        usize::try_from(slot)
+            .ok()
+            .filter(|&i| self.slots.get(i).is_some_and(Option::is_some))
+            .ok_or(FleetError::UnknownSlot { slot })
     }
 
     fn entry(&self, slot: i64) -> Result<&Entry, FleetError> {
         let i = self.index(slot)?;
-        Ok(self.slots[i].as_ref().expect("index() checked the slot is in use"))
+        Ok(self.slots[i]
+            .as_ref()
+            .expect("index() checked the slot is in use"))
     }
 
     /// Number of vehicles in use.
@@ -219,7 +263,11 @@ impl Fleet {
 
     /// Slots in use, ascending.
     pub fn slots(&self) -> Vec<usize> {
-        self.slots.iter().enumerate().filter_map(|(i, e)| e.as_ref().map(|_| i)).collect()
+        self.slots
+            .iter()
+            .enumerate()
+            .filter_map(|(i, e)| e.as_ref().map(|_| i))
+            .collect()
     }
 
     pub fn vehicle_track(&self, slot: i64) -> Result<usize, FleetError> {
@@ -235,9 +283,15 @@ impl Fleet {
     /// Replaces a vehicle's configuration (validated). Its projection hints
     /// are dropped (the next step searches the whole track once); the
     /// corridor stays the track's.
-    pub fn set_vehicle_config(&mut self, slot: i64, config: ControllerConfig) -> Result<(), FleetError> {
+    pub fn set_vehicle_config(
+        &mut self,
+        slot: i64,
+        config: ControllerConfig,
+    ) -> Result<(), FleetError> {
         let i = self.index(slot)?;
-        let e = self.slots[i].as_mut().expect("index() checked the slot is in use");
+        let e = self.slots[i]
+            .as_mut()
+            .expect("index() checked the slot is in use");
         e.controller = Controller::new(e.controller.track().clone(), config, &e.params)?;
         Ok(())
     }
@@ -246,7 +300,11 @@ impl Fleet {
     /// searches its whole track).
     pub fn reset_vehicle(&mut self, slot: i64) -> Result<(), FleetError> {
         let i = self.index(slot)?;
-        self.slots[i].as_mut().expect("index() checked the slot is in use").controller.reset();
+        self.slots[i]
+            .as_mut()
+            .expect("index() checked the slot is in use")
+            .controller
+            .reset();
         Ok(())
     }
 
@@ -267,13 +325,21 @@ impl Fleet {
         for (argument, col) in cols {
             if let Some(c) = col {
                 if c.len() != n {
-                    return Err(FleetError::Length { argument, expected: n, got: c.len() });
+                    return Err(FleetError::Length {
+                        argument,
+                        expected: n,
+                        got: c.len(),
+                    });
                 }
             }
         }
         if let Some(dt) = inp.dt_s {
             if !(dt.is_finite() && dt > 0.0) {
-                return Err(FleetError::Parameter { name: "dt", value: dt, message: "must be finite and > 0" });
+                return Err(FleetError::Parameter {
+                    name: "dt",
+                    value: dt,
+                    message: "must be finite and > 0",
+                });
             }
         }
         self.epoch = self.epoch.wrapping_add(1);
@@ -298,10 +364,25 @@ impl Fleet {
         self.check(inp)?;
         let n = inp.slots.len();
         // One &mut per listed slot, in input order (slots are unique: checked).
-        let mut by_slot: Vec<Option<&mut Entry>> = self.slots.iter_mut().map(Option::as_mut).collect();
-        let mut entries: Vec<&mut Entry> = inp.slots.iter().map(|&s| by_slot[s as usize].take().expect("check() verified every slot once")).collect();
+        let mut by_slot: Vec<Option<&mut Entry>> =
+            self.slots.iter_mut().map(Option::as_mut).collect();
+        let mut entries: Vec<&mut Entry> = inp
+            .slots
+            .iter()
+            .map(|&s| {
+                by_slot[s as usize]
+                    .take()
+                    .expect("check() verified every slot once")
+            })
+            .collect();
         let mut rows = vec![Row::default(); n];
-        let threads = if n >= PARALLEL_MIN_VEHICLES { std::thread::available_parallelism().map_or(1, |p| p.get()).min(MAX_THREADS) } else { 1 };
+        let threads = if n >= PARALLEL_MIN_VEHICLES {
+            std::thread::available_parallelism()
+                .map_or(1, |p| p.get())
+                .min(MAX_THREADS)
+        } else {
+            1
+        };
         if threads <= 1 {
             for (i, (e, row)) in entries.iter_mut().zip(rows.iter_mut()).enumerate() {
                 *row = step_one(e, inp, i);
@@ -309,7 +390,11 @@ impl Fleet {
         } else {
             let chunk = n.div_ceil(threads);
             std::thread::scope(|scope| {
-                for (c, (es, rs)) in entries.chunks_mut(chunk).zip(rows.chunks_mut(chunk)).enumerate() {
+                for (c, (es, rs)) in entries
+                    .chunks_mut(chunk)
+                    .zip(rows.chunks_mut(chunk))
+                    .enumerate()
+                {
                     scope.spawn(move || {
                         for (j, (e, row)) in es.iter_mut().zip(rs.iter_mut()).enumerate() {
                             *row = step_one(e, inp, c * chunk + j);
@@ -372,7 +457,13 @@ impl Default for Row {
             s_m: nan,
             curvature_per_m: nan,
             virtual_obstacle_m: nan,
-            next: VehicleState { x_m: nan, y_m: nan, theta_rad: nan, v_mps: nan, delta_rad: nan },
+            next: VehicleState {
+                x_m: nan,
+                y_m: nan,
+                theta_rad: nan,
+                v_mps: nan,
+                delta_rad: nan,
+            },
         }
     }
 }
@@ -380,29 +471,57 @@ impl Default for Row {
 /// Steps entry `e` with input row `i`; an unusable input gives the NaN row.
 fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
     let opt = |c: Option<&[f64]>| c.map_or(f64::NAN, |c| c[i]);
-    let state = VehicleState { x_m: inp.x_m[i], y_m: inp.y_m[i], theta_rad: inp.theta_rad[i], v_mps: inp.v_mps[i], delta_rad: inp.delta_rad[i] };
+    let state = VehicleState {
+        x_m: inp.x_m[i],
+        y_m: inp.y_m[i],
+        theta_rad: inp.theta_rad[i],
+        v_mps: inp.v_mps[i],
+        delta_rad: inp.delta_rad[i],
+    };
     let a = opt(inp.alpha);
-    let alpha = if a.is_nan() { e.controller.config().lat_blend_factor } else { a };
-    let mut obstacles = [Obstacle { gap_m: 0.0, speed_mps: 0.0 }; 2];
+    let alpha = if a.is_nan() {
+        e.controller.config().lat_blend_factor
+    } else {
+        a
+    };
+    let mut obstacles = [Obstacle {
+        gap_m: 0.0,
+        speed_mps: 0.0,
+    }; 2];
     let mut n_obs = 0;
     let gap = opt(inp.leader_gap_m);
     if gap.is_finite() {
         let vl = opt(inp.leader_speed_mps);
-        obstacles[n_obs] = Obstacle { gap_m: gap, speed_mps: if vl.is_finite() { vl.max(0.0) } else { 0.0 } };
+        obstacles[n_obs] = Obstacle {
+            gap_m: gap,
+            speed_mps: if vl.is_finite() { vl.max(0.0) } else { 0.0 },
+        };
         n_obs += 1;
     }
     let stop = opt(inp.stop_gap_m);
     if stop.is_finite() {
-        obstacles[n_obs] = Obstacle { gap_m: stop, speed_mps: 0.0 };
+        obstacles[n_obs] = Obstacle {
+            gap_m: stop,
+            speed_mps: 0.0,
+        };
         n_obs += 1;
     }
-    let Ok(o) = e.controller.step_with_alpha(&state, alpha, &obstacles[..n_obs]) else {
+    let Ok(o) = e
+        .controller
+        .step_with_alpha(&state, alpha, &obstacles[..n_obs])
+    else {
         return Row::default();
     };
     let next = match inp.dt_s {
         Some(dt) => {
             let mut veh = Vehicle::new(state, e.params, e.controller.config().direction, 0);
-            veh.step(Command { steering_rad: o.steering_rad, accel_mps2: o.accel_mps2 }, dt);
+            veh.step(
+                Command {
+                    steering_rad: o.steering_rad,
+                    accel_mps2: o.accel_mps2,
+                },
+                dt,
+            );
             veh.state
         }
         None => Row::default().next,
@@ -428,12 +547,25 @@ mod tests {
 
     fn fleet_with(n: usize) -> (Fleet, Vec<i64>) {
         let mut f = Fleet::new();
-        let a = f.add_track(Path::test_track(2.0).unwrap(), ControllerConfig::default()).unwrap();
-        let b = f.add_track(Path::circle(40.0, 1e-3).unwrap(), ControllerConfig { path_width_m: 6.0, ..Default::default() }).unwrap();
+        let a = f
+            .add_track(Path::test_track(2.0).unwrap(), ControllerConfig::default())
+            .unwrap();
+        let b = f
+            .add_track(
+                Path::circle(40.0, 1e-3).unwrap(),
+                ControllerConfig {
+                    path_width_m: 6.0,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
         let slots = (0..n)
             .map(|i| {
                 let t = if i % 2 == 0 { a } else { b } as i64;
-                let cfg = (i % 3 == 0).then(|| ControllerConfig { lat_blend_factor: 0.2, ..f.tracks[t as usize].config.clone() });
+                let cfg = (i % 3 == 0).then(|| ControllerConfig {
+                    lat_blend_factor: 0.2,
+                    ..f.tracks[t as usize].config.clone()
+                });
                 f.add_vehicle(t, cfg, None).unwrap() as i64
             })
             .collect();
@@ -441,11 +573,25 @@ mod tests {
     }
 
     fn states(n: usize, k: usize) -> Vec<VehicleState> {
-        (0..n).map(|i| VehicleState { x_m: 1.0 + 0.1 * i as f64 + 0.3 * k as f64, y_m: 2.0 - 0.05 * i as f64, theta_rad: 0.05 * i as f64, v_mps: 3.0, delta_rad: 0.01 }).collect()
+        (0..n)
+            .map(|i| VehicleState {
+                x_m: 1.0 + 0.1 * i as f64 + 0.3 * k as f64,
+                y_m: 2.0 - 0.05 * i as f64,
+                theta_rad: 0.05 * i as f64,
+                v_mps: 3.0,
+                delta_rad: 0.01,
+            })
+            .collect()
     }
 
     fn cols(s: &[VehicleState]) -> [Vec<f64>; 5] {
-        [s.iter().map(|s| s.x_m).collect(), s.iter().map(|s| s.y_m).collect(), s.iter().map(|s| s.theta_rad).collect(), s.iter().map(|s| s.v_mps).collect(), s.iter().map(|s| s.delta_rad).collect()]
+        [
+            s.iter().map(|s| s.x_m).collect(),
+            s.iter().map(|s| s.y_m).collect(),
+            s.iter().map(|s| s.theta_rad).collect(),
+            s.iter().map(|s| s.v_mps).collect(),
+            s.iter().map(|s| s.delta_rad).collect(),
+        ]
     }
 
     #[test]
@@ -457,19 +603,41 @@ mod tests {
             .iter()
             .map(|&s| {
                 let e = f.entry(s).unwrap();
-                (Controller::new(e.controller.track().clone(), e.controller.config().clone(), &e.params).unwrap(), e.params)
+                (
+                    Controller::new(
+                        e.controller.track().clone(),
+                        e.controller.config().clone(),
+                        &e.params,
+                    )
+                    .unwrap(),
+                    e.params,
+                )
             })
             .collect();
         for k in 0..5 {
             let st = states(n, k);
             let [x, y, th, v, d] = cols(&st);
-            let gaps: Vec<f64> = (0..n).map(|i| if i == 2 { 2.0 } else { f64::NAN }).collect();
+            let gaps: Vec<f64> = (0..n)
+                .map(|i| if i == 2 { 2.0 } else { f64::NAN })
+                .collect();
             let lspeed = vec![1.0; n];
-            let inp = FleetInputs { leader_gap_m: Some(&gaps), leader_speed_mps: Some(&lspeed), dt_s: Some(0.1), ..FleetInputs::new(&slots, &x, &y, &th, &v, &d) };
+            let inp = FleetInputs {
+                leader_gap_m: Some(&gaps),
+                leader_speed_mps: Some(&lspeed),
+                dt_s: Some(0.1),
+                ..FleetInputs::new(&slots, &x, &y, &th, &v, &d)
+            };
             let out = f.step(&inp).unwrap();
             for i in 0..n {
                 let (c, p) = &mut singles[i];
-                let obs: Vec<Obstacle> = if i == 2 { vec![Obstacle { gap_m: 2.0, speed_mps: 1.0 }] } else { vec![] };
+                let obs: Vec<Obstacle> = if i == 2 {
+                    vec![Obstacle {
+                        gap_m: 2.0,
+                        speed_mps: 1.0,
+                    }]
+                } else {
+                    vec![]
+                };
                 let o = c.step(&st[i], &obs).unwrap();
                 assert!(out.ok[i]);
                 assert_eq!(out.steering_rad[i], o.steering_rad);
@@ -477,9 +645,18 @@ mod tests {
                 assert_eq!(out.lateral_error_m[i], o.lateral_error_m);
                 assert_eq!(out.s_m[i], o.s_m);
                 let mut veh = Vehicle::new(st[i], *p, Direction::Forward, 0);
-                veh.step(Command { steering_rad: o.steering_rad, accel_mps2: o.accel_mps2 }, 0.1);
+                veh.step(
+                    Command {
+                        steering_rad: o.steering_rad,
+                        accel_mps2: o.accel_mps2,
+                    },
+                    0.1,
+                );
                 let next = out.next.as_ref().unwrap();
-                assert_eq!((next.x_m[i], next.theta_rad[i], next.v_mps[i]), (veh.state.x_m, veh.state.theta_rad, veh.state.v_mps));
+                assert_eq!(
+                    (next.x_m[i], next.theta_rad[i], next.v_mps[i]),
+                    (veh.state.x_m, veh.state.theta_rad, veh.state.v_mps)
+                );
             }
             // A slower leader 2 m ahead makes vehicle 2 brake (3 m/s, tau = 1 s).
             assert!(out.accel_mps2[2] < -1.0, "{}", out.accel_mps2[2]);
@@ -496,7 +673,13 @@ mod tests {
         let [x2, y2, th2, v2, d2] = cols(&st);
         th[1] = f64::NAN;
         let alpha = vec![f64::NAN, 0.5, 2.0, 0.7];
-        let out = f.step(&FleetInputs { alpha: Some(&alpha), dt_s: Some(0.05), ..FleetInputs::new(&slots, &x, &y, &th, &v, &d) }).unwrap();
+        let out = f
+            .step(&FleetInputs {
+                alpha: Some(&alpha),
+                dt_s: Some(0.05),
+                ..FleetInputs::new(&slots, &x, &y, &th, &v, &d)
+            })
+            .unwrap();
         assert_eq!(out.ok, vec![true, false, false, true]);
         assert!(out.steering_rad[1].is_nan() && out.next.as_ref().unwrap().x_m[2].is_nan());
         // NaN alpha = the configured one (slot 0 was added with 0.2).
@@ -506,10 +689,24 @@ mod tests {
         let sl: Vec<i64> = good.iter().map(|&i| slots[i]).collect();
         let pick = |c: &[f64]| good.iter().map(|&i| c[i]).collect::<Vec<f64>>();
         let ref_out = g
-            .step(&FleetInputs { alpha: Some(&pick(&alpha)), dt_s: Some(0.05), ..FleetInputs::new(&sl, &pick(&x2), &pick(&y2), &pick(&th2), &pick(&v2), &pick(&d2)) })
+            .step(&FleetInputs {
+                alpha: Some(&pick(&alpha)),
+                dt_s: Some(0.05),
+                ..FleetInputs::new(
+                    &sl,
+                    &pick(&x2),
+                    &pick(&y2),
+                    &pick(&th2),
+                    &pick(&v2),
+                    &pick(&d2),
+                )
+            })
             .unwrap();
         assert_eq!(pick(&out.steering_rad), ref_out.steering_rad);
-        assert_eq!(pick(&out.next.as_ref().unwrap().y_m), ref_out.next.unwrap().y_m);
+        assert_eq!(
+            pick(&out.next.as_ref().unwrap().y_m),
+            ref_out.next.unwrap().y_m
+        );
     }
 
     #[test]
@@ -518,24 +715,59 @@ mod tests {
         let st = states(3, 0);
         let [x, y, th, v, d] = cols(&st);
         let short = vec![0.0; 2];
-        let e = f.step(&FleetInputs::new(&slots, &x, &short, &th, &v, &d)).unwrap_err();
-        assert_eq!(e, FleetError::Length { argument: "y", expected: 3, got: 2 });
+        let e = f
+            .step(&FleetInputs::new(&slots, &x, &short, &th, &v, &d))
+            .unwrap_err();
+        assert_eq!(
+            e,
+            FleetError::Length {
+                argument: "y",
+                expected: 3,
+                got: 2
+            }
+        );
         assert!(e.to_string().contains("`y`"));
-        let e = f.step(&FleetInputs { stop_gap_m: Some(&short), ..FleetInputs::new(&slots, &x, &y, &th, &v, &d) }).unwrap_err();
+        let e = f
+            .step(&FleetInputs {
+                stop_gap_m: Some(&short),
+                ..FleetInputs::new(&slots, &x, &y, &th, &v, &d)
+            })
+            .unwrap_err();
         assert!(e.to_string().contains("stop_gap"), "{e}");
         let bad = vec![slots[0], 99, slots[2]];
-        assert_eq!(f.step(&FleetInputs::new(&bad, &x, &y, &th, &v, &d)).unwrap_err(), FleetError::UnknownSlot { slot: 99 });
+        assert_eq!(
+            f.step(&FleetInputs::new(&bad, &x, &y, &th, &v, &d))
+                .unwrap_err(),
+            FleetError::UnknownSlot { slot: 99 }
+        );
         let neg = vec![slots[0], -1, slots[2]];
-        assert!(f.step(&FleetInputs::new(&neg, &x, &y, &th, &v, &d)).unwrap_err().to_string().contains("slot -1"));
+        assert!(f
+            .step(&FleetInputs::new(&neg, &x, &y, &th, &v, &d))
+            .unwrap_err()
+            .to_string()
+            .contains("slot -1"));
         let dup = vec![slots[0], slots[1], slots[0]];
-        assert_eq!(f.step(&FleetInputs::new(&dup, &x, &y, &th, &v, &d)).unwrap_err(), FleetError::DuplicateSlot { slot: slots[0] });
-        let e = f.step(&FleetInputs { dt_s: Some(-0.1), ..FleetInputs::new(&slots, &x, &y, &th, &v, &d) }).unwrap_err();
+        assert_eq!(
+            f.step(&FleetInputs::new(&dup, &x, &y, &th, &v, &d))
+                .unwrap_err(),
+            FleetError::DuplicateSlot { slot: slots[0] }
+        );
+        let e = f
+            .step(&FleetInputs {
+                dt_s: Some(-0.1),
+                ..FleetInputs::new(&slots, &x, &y, &th, &v, &d)
+            })
+            .unwrap_err();
         assert!(e.to_string().contains("dt"));
         // A rejected call did not advance any controller: the same call on a
         // fresh twin gives the same answer.
         let (mut g, _) = fleet_with(3);
-        let a = f.step(&FleetInputs::new(&slots, &x, &y, &th, &v, &d)).unwrap();
-        let b = g.step(&FleetInputs::new(&slots, &x, &y, &th, &v, &d)).unwrap();
+        let a = f
+            .step(&FleetInputs::new(&slots, &x, &y, &th, &v, &d))
+            .unwrap();
+        let b = g
+            .step(&FleetInputs::new(&slots, &x, &y, &th, &v, &d))
+            .unwrap();
         assert_eq!(a, b);
     }
 
@@ -544,15 +776,35 @@ mod tests {
         let (mut f, slots) = fleet_with(4);
         assert_eq!(f.len(), 4);
         f.remove_vehicle(slots[1]).unwrap();
-        assert_eq!(f.remove_vehicle(slots[1]).unwrap_err(), FleetError::UnknownSlot { slot: slots[1] });
+        assert_eq!(
+            f.remove_vehicle(slots[1]).unwrap_err(),
+            FleetError::UnknownSlot { slot: slots[1] }
+        );
         assert_eq!(f.slots(), vec![0, 2, 3]);
         assert_eq!(f.add_vehicle(1, None, None).unwrap(), 1);
         assert_eq!(f.vehicle_track(1).unwrap(), 1);
-        assert_eq!(f.add_vehicle(5, None, None).unwrap_err(), FleetError::UnknownTrack { track_id: 5 });
-        let bad = ControllerConfig { lat_blend_factor: 1.5, ..Default::default() };
-        assert!(f.add_vehicle(0, Some(bad.clone()), None).unwrap_err().to_string().contains("lat_blend_factor"));
+        assert_eq!(
+            f.add_vehicle(5, None, None).unwrap_err(),
+            FleetError::UnknownTrack { track_id: 5 }
+        );
+        let bad = ControllerConfig {
+            lat_blend_factor: 1.5,
+            ..Default::default()
+        };
+        assert!(f
+            .add_vehicle(0, Some(bad.clone()), None)
+            .unwrap_err()
+            .to_string()
+            .contains("lat_blend_factor"));
         assert!(f.set_vehicle_config(0, bad).is_err());
-        f.set_vehicle_config(0, ControllerConfig { lat_blend_factor: 0.9, ..Default::default() }).unwrap();
+        f.set_vehicle_config(
+            0,
+            ControllerConfig {
+                lat_blend_factor: 0.9,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         assert_eq!(f.vehicle_config(0).unwrap().lat_blend_factor, 0.9);
         assert_eq!(f.len(), 4);
         // A batch large enough to be split over threads equals the serial one.
@@ -560,15 +812,37 @@ mod tests {
         let (mut big, big_slots) = fleet_with(n);
         let st = states(n, 1);
         let [x, y, th, v, d] = cols(&st);
-        let par = big.step(&FleetInputs { dt_s: Some(0.1), ..FleetInputs::new(&big_slots, &x, &y, &th, &v, &d) }).unwrap();
+        let par = big
+            .step(&FleetInputs {
+                dt_s: Some(0.1),
+                ..FleetInputs::new(&big_slots, &x, &y, &th, &v, &d)
+            })
+            .unwrap();
         let (mut small, small_slots) = fleet_with(n);
         for i in (0..n).step_by(97) {
-            let one = small.step(&FleetInputs { dt_s: Some(0.1), ..FleetInputs::new(&small_slots[i..i + 1], &x[i..i + 1], &y[i..i + 1], &th[i..i + 1], &v[i..i + 1], &d[i..i + 1]) }).unwrap();
+            let one = small
+                .step(&FleetInputs {
+                    dt_s: Some(0.1),
+                    ..FleetInputs::new(
+                        &small_slots[i..i + 1],
+                        &x[i..i + 1],
+                        &y[i..i + 1],
+                        &th[i..i + 1],
+                        &v[i..i + 1],
+                        &d[i..i + 1],
+                    )
+                })
+                .unwrap();
             assert_eq!(par.steering_rad[i], one.steering_rad[0]);
-            assert_eq!(par.next.as_ref().unwrap().theta_rad[i], one.next.as_ref().unwrap().theta_rad[0]);
+            assert_eq!(
+                par.next.as_ref().unwrap().theta_rad[i],
+                one.next.as_ref().unwrap().theta_rad[0]
+            );
         }
         // Empty step is fine.
-        let out = f.step(&FleetInputs::new(&[], &[], &[], &[], &[], &[])).unwrap();
+        let out = f
+            .step(&FleetInputs::new(&[], &[], &[], &[], &[], &[]))
+            .unwrap();
         assert!(out.ok.is_empty());
     }
 }

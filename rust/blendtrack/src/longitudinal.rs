@@ -63,6 +63,23 @@ pub fn stopping_accel(v: f64, gap_m: f64, v_l: f64, s0: f64, tau: f64, b_f: f64,
     (b_f * tau - 2.0 * v - 2.0 * b_f * u.sqrt()) / (2.0 * tau)
 }
 
+/// The gap beyond which a standing obstacle no longer matters: at that gap
+/// the stopping law asks for `preferred_acceleration`, more than free flow
+/// ever does, so `min(a_free, a_r)` ignores it. Solves the stopping-law
+/// identity for `a = preferred_acceleration`, `v_l = 0`:
+/// `s0 + v tau + a tau^2 / 2 + (v + a tau)^2 / (-2 b_f)`.
+/// The controller casts its ray no further than this (plus the corridor
+/// width), which keeps a step cheap at low speed without changing the command.
+pub fn relevance_distance(speed_abs: f64, cfg: &ControllerConfig) -> f64 {
+    let a = cfg.preferred_acceleration;
+    let tau = cfg.reaction_time;
+    let v1 = speed_abs + a * tau;
+    cfg.preferred_stop_dist
+        + speed_abs * tau
+        + 0.5 * a * tau * tau
+        + v1 * v1 / (-2.0 * cfg.max_deceleration)
+}
+
 /// Longitudinal command and what decided it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LongitudinalOutput {
@@ -109,11 +126,255 @@ pub fn longitudinal_accel(
 }
 
 /// The virtual borders of a path.
+///
+/// Each border is kept twice: at full resolution (one vertex per path
+/// vertex, [`Corridor::left`], [`Corridor::right`]) and simplified for the
+/// ray cast (Douglas-Peucker, 1 cm tolerance), so that a straight stretch of
+/// a densely sampled SUMO lane costs one segment test instead of hundreds.
 #[derive(Debug, Clone)]
 pub struct Corridor {
     left: Vec<Point2<f64>>,
     right: Vec<Point2<f64>>,
+    left_simple: Border,
+    right_simple: Border,
     max_width_m: f64,
+}
+
+/// A simplified border polyline with the path arc length of each vertex.
+#[derive(Debug, Clone)]
+struct Border {
+    pts: Vec<Point2<f64>>,
+    s: Vec<f64>,
+    closed: bool,
+    path_length: f64,
+    /// +1 for the left border (leaving = crossing it right to left), -1 for the right.
+    leaving_sign: f64,
+    /// Bounding box of each run of `BOX_SEGMENTS` segments, so a ray cast can
+    /// skip a run its ray misses with one slab test.
+    boxes: Vec<(Point2<f64>, Point2<f64>)>,
+}
+
+/// Segments per bounding box of a border.
+const BOX_SEGMENTS: usize = 8;
+
+/// Does the ray `o + t u`, `0 <= t <= t_max`, touch the box `[lo, hi]`?
+#[inline]
+fn ray_hits_box(
+    o: &Point2<f64>,
+    u: &Vector2<f64>,
+    lo: &Point2<f64>,
+    hi: &Point2<f64>,
+    t_max: f64,
+) -> bool {
+    let (mut t0, mut t1) = (0.0f64, t_max);
+    for axis in 0..2 {
+        if u[axis].abs() < 1e-15 {
+            if o[axis] < lo[axis] || o[axis] > hi[axis] {
+                return false;
+            }
+            continue;
+        }
+        let inv = 1.0 / u[axis];
+        let (mut ta, mut tb) = ((lo[axis] - o[axis]) * inv, (hi[axis] - o[axis]) * inv);
+        if ta > tb {
+            std::mem::swap(&mut ta, &mut tb);
+        }
+        t0 = t0.max(ta);
+        t1 = t1.min(tb);
+        if t0 > t1 {
+            return false;
+        }
+    }
+    true
+}
+
+/// Tolerance of the border simplification (m).
+const SIMPLIFY_TOL_M: f64 = 0.01;
+
+/// Indices of the vertices kept by Douglas-Peucker on `pts[lo..=hi]`.
+fn simplify(pts: &[Point2<f64>], tol: f64) -> Vec<usize> {
+    let n = pts.len();
+    if n <= 2 {
+        return (0..n).collect();
+    }
+    let mut keep = vec![false; n];
+    keep[0] = true;
+    keep[n - 1] = true;
+    let mut stack = vec![(0usize, n - 1)];
+    while let Some((lo, hi)) = stack.pop() {
+        if hi <= lo + 1 {
+            continue;
+        }
+        let a = pts[lo];
+        let e = pts[hi] - a;
+        let len = e.norm();
+        let mut worst = (0.0f64, lo);
+        for (i, p) in pts.iter().enumerate().take(hi).skip(lo + 1) {
+            let d = if len < 1e-12 {
+                (p - a).norm()
+            } else {
+                cross(&e, &(p - a)).abs() / len
+            };
+            // Also keep vertices that fold back beyond the chord's ends.
+            let t = if len < 1e-12 {
+                0.0
+            } else {
+                e.dot(&(p - a)) / (len * len)
+            };
+            let d = if !(0.0..=1.0).contains(&t) {
+                d.max(tol * 2.0)
+            } else {
+                d
+            };
+            if d > worst.0 {
+                worst = (d, i);
+            }
+        }
+        if worst.0 > tol {
+            keep[worst.1] = true;
+            stack.push((lo, worst.1));
+            stack.push((worst.1, hi));
+        }
+    }
+    (0..n).filter(|&i| keep[i]).collect()
+}
+
+impl Border {
+    fn new(
+        full: &[Point2<f64>],
+        vertex_s: &[f64],
+        closed: bool,
+        path_length: f64,
+        leaving_sign: f64,
+    ) -> Self {
+        let idx = simplify(full, SIMPLIFY_TOL_M);
+        let pts: Vec<Point2<f64>> = idx.iter().map(|&i| full[i]).collect();
+        let n = pts.len();
+        let n_seg = if closed { n } else { n.saturating_sub(1) };
+        let boxes = (0..n_seg)
+            .step_by(BOX_SEGMENTS)
+            .map(|start| {
+                let mut lo = pts[start];
+                let mut hi = pts[start];
+                for k in start..(start + BOX_SEGMENTS).min(n_seg) {
+                    let q = pts[(k + 1) % n];
+                    lo = Point2::new(lo.x.min(q.x), lo.y.min(q.y));
+                    hi = Point2::new(hi.x.max(q.x), hi.y.max(q.y));
+                }
+                (lo, hi)
+            })
+            .collect();
+        Border {
+            pts,
+            s: idx.iter().map(|&i| vertex_s[i]).collect(),
+            closed,
+            path_length,
+            leaving_sign,
+            boxes,
+        }
+    }
+
+    fn n_segments(&self) -> usize {
+        if self.closed {
+            self.pts.len()
+        } else {
+            self.pts.len() - 1
+        }
+    }
+
+    /// Ray parameter at which the ray leaves the corridor through segment `k`.
+    #[inline]
+    fn exit(&self, k: usize, u: &Vector2<f64>, o: &Point2<f64>) -> Option<f64> {
+        let a = &self.pts[k];
+        let b = &self.pts[(k + 1) % self.pts.len()];
+        segment_exit(a, b, u, o, self.leaving_sign)
+    }
+
+    /// Smallest exit parameter over the segments from path arc length
+    /// `start_s` on, scanning at most `scan_m` of path and stopping early
+    /// (see [`Corridor::ray_cast`]).
+    fn first_exit(
+        &self,
+        u: &Vector2<f64>,
+        o: &Point2<f64>,
+        start_s: f64,
+        scan_m: f64,
+        slack_m: f64,
+    ) -> f64 {
+        let n_seg = self.n_segments();
+        if n_seg == 0 {
+            return f64::INFINITY;
+        }
+        // Segment holding start_s.
+        let mut k = self
+            .s
+            .partition_point(|&v| v <= start_s)
+            .saturating_sub(1)
+            .min(n_seg - 1);
+        let mut best = f64::INFINITY;
+        let mut visited = 0;
+        while visited < n_seg {
+            visited += 1;
+            if k % BOX_SEGMENTS == 0 && k + BOX_SEGMENTS <= n_seg {
+                let (lo, hi) = &self.boxes[k / BOX_SEGMENTS];
+                if !ray_hits_box(o, u, lo, hi, best.min(1e12)) {
+                    // The ray cannot leave through this run: account for its length and move on.
+                    k += BOX_SEGMENTS - 1;
+                    visited += BOX_SEGMENTS - 1;
+                }
+            }
+            if let Some(t) = self.exit(k, u, o) {
+                best = best.min(t);
+            }
+            // Arc length (along the path) scanned once this segment is done.
+            let end_s = if k + 1 < self.pts.len() {
+                self.s[k + 1]
+            } else {
+                self.path_length
+            };
+            let mut scanned = end_s - start_s;
+            if self.closed && scanned < 0.0 {
+                scanned += self.path_length;
+            }
+            if scanned > scan_m || scanned > 2.0 * best + slack_m {
+                break;
+            }
+            k += 1;
+            if k >= n_seg {
+                if !self.closed {
+                    break;
+                }
+                k = 0;
+            }
+        }
+        best
+    }
+}
+
+/// Ray parameter at which the ray `o + t u` leaves the corridor through the
+/// border segment `a -> b` (`leaving_sign` +1 for a left border, -1 for a right one).
+#[inline]
+fn segment_exit(
+    a: &Point2<f64>,
+    b: &Point2<f64>,
+    u: &Vector2<f64>,
+    o: &Point2<f64>,
+    leaving_sign: f64,
+) -> Option<f64> {
+    let e = b - a;
+    let denom = cross(u, &e);
+    // Leaving a left border: the ray crosses it from its right to its left.
+    if denom.abs() < 1e-15 || -denom * leaving_sign <= 0.0 {
+        return None;
+    }
+    let ao = a - o;
+    let t = cross(&ao, &e) / denom;
+    let lam = cross(&ao, u) / denom;
+    if t >= 0.0 && (0.0..=1.0).contains(&lam) {
+        Some(t)
+    } else {
+        None
+    }
 }
 
 impl Corridor {
@@ -139,24 +400,39 @@ impl Corridor {
             left.push(p + n * wl);
             right.push(p - n * wr);
         }
+        let (closed, len) = (path.is_closed(), path.length());
+        let left_simple = Border::new(&left, vs, closed, len, 1.0);
+        let right_simple = Border::new(&right, vs, closed, len, -1.0);
         Corridor {
             left,
             right,
+            left_simple,
+            right_simple,
             max_width_m: max_w,
         }
     }
 
+    /// Left border, one point per path vertex.
     pub fn left(&self) -> &[Point2<f64>] {
         &self.left
     }
+    /// Right border, one point per path vertex.
     pub fn right(&self) -> &[Point2<f64>] {
         &self.right
+    }
+    /// Largest half-width of the corridor (m).
+    pub fn max_width(&self) -> f64 {
+        self.max_width_m
+    }
+    /// Vertices kept by the simplification (left, right): what a ray cast scans.
+    pub fn simplified_len(&self) -> (usize, usize) {
+        (self.left_simple.pts.len(), self.right_simple.pts.len())
     }
 
     /// Distance along the ray from `origin` in direction `heading_rad` to the
     /// first border segment it leaves the corridor through, looking at border
     /// segments from a little behind `s_origin` up to `horizon_m` ahead along
-    /// the path. `None` = free road.
+    /// the path. `None` = free road (within the horizon).
     ///
     /// Scanning stops early once the scanned arc length exceeds
     /// `2 t_best + 2 w_max + 5 m`: a border segment that far along the path
@@ -172,38 +448,21 @@ impl Corridor {
         horizon_m: f64,
     ) -> Option<f64> {
         let u = Vector2::new(heading_rad.cos(), heading_rad.sin());
-        let n_seg = path.n_segments();
-        let vs = path.vertex_s();
         let back = self.max_width_m + 1.0;
         let start_s = if path.is_closed() {
-            s_origin - back
+            path.wrap_s(s_origin - back)
         } else {
             (s_origin - back).max(0.0)
         };
-        let mut k = path.segment_at(start_s);
-        let mut best = f64::INFINITY;
-        let mut scanned_len = 0.0;
-        let total = back + horizon_m;
-        for _ in 0..n_seg {
-            if let Some(t) = self.segment_exit(k, &u, origin) {
-                best = best.min(t);
-            }
-            let k1 = if k + 1 < vs.len() { k + 1 } else { 0 };
-            let seg_len = if k1 == 0 {
-                path.length() - vs[k]
-            } else {
-                vs[k1] - vs[k]
-            };
-            scanned_len += seg_len;
-            if scanned_len > total || scanned_len - back > 2.0 * best + 2.0 * self.max_width_m + 5.0
-            {
-                break;
-            }
-            if !path.is_closed() && k + 1 >= n_seg {
-                break;
-            }
-            k = (k + 1) % n_seg;
-        }
+        let scan = back + horizon_m;
+        let slack = back + 2.0 * self.max_width_m + 5.0;
+        let best = self
+            .left_simple
+            .first_exit(&u, origin, start_s, scan, slack)
+            .min(
+                self.right_simple
+                    .first_exit(&u, origin, start_s, scan, slack),
+            );
         if best.is_finite() {
             Some(best)
         } else {
@@ -211,44 +470,24 @@ impl Corridor {
         }
     }
 
-    /// Ray cast against every border segment (reference for tests).
-    pub fn ray_cast_all(&self, path: &Path, origin: &Point2<f64>, heading_rad: f64) -> Option<f64> {
+    /// Ray cast against every segment of the (simplified) borders, with no
+    /// window and no early exit: the reference the tests hold [`Self::ray_cast`] to.
+    pub fn ray_cast_all(
+        &self,
+        _path: &Path,
+        origin: &Point2<f64>,
+        heading_rad: f64,
+    ) -> Option<f64> {
         let u = Vector2::new(heading_rad.cos(), heading_rad.sin());
-        let best = (0..path.n_segments())
-            .filter_map(|k| self.segment_exit(k, &u, origin))
+        let best = [&self.left_simple, &self.right_simple]
+            .iter()
+            .flat_map(|b| (0..b.n_segments()).filter_map(move |k| b.exit(k, &u, origin)))
             .fold(f64::INFINITY, f64::min);
         if best.is_finite() {
             Some(best)
         } else {
             None
         }
-    }
-
-    /// Smallest ray parameter at which the ray leaves the corridor through
-    /// segment `k` of either border.
-    #[inline]
-    fn segment_exit(&self, k: usize, u: &Vector2<f64>, o: &Point2<f64>) -> Option<f64> {
-        let n = self.left.len();
-        let k1 = (k + 1) % n;
-        let mut best: Option<f64> = None;
-        // Left border: leaving = ray crosses it from its right to its left.
-        for (a, b, leaving_sign) in [
-            (&self.left[k], &self.left[k1], 1.0),
-            (&self.right[k], &self.right[k1], -1.0),
-        ] {
-            let e = b - a;
-            let denom = cross(u, &e);
-            if denom.abs() < 1e-15 || cross(&e, u) * leaving_sign <= 0.0 {
-                continue;
-            }
-            let ao = a - o;
-            let t = cross(&ao, &e) / denom;
-            let lam = cross(&ao, u) / denom;
-            if t >= 0.0 && (0.0..=1.0).contains(&lam) {
-                best = Some(best.map_or(t, |b: f64| b.min(t)));
-            }
-        }
-        best
     }
 }
 
@@ -308,6 +547,46 @@ mod tests {
             (slightly - (1.0 - 1.1f64.powi(3))).abs() < 1e-12,
             "bound inactive near v0"
         );
+    }
+
+    #[test]
+    fn obstacles_beyond_the_relevance_distance_do_not_change_the_command() {
+        let cfg = ControllerConfig {
+            preferred_stop_dist: 1.5,
+            ..Default::default()
+        };
+        for &v in &[0.0, 1.0, 3.0, 10.0, 30.0] {
+            let d = relevance_distance(v, &cfg);
+            let at = stopping_accel(
+                v,
+                d,
+                0.0,
+                cfg.preferred_stop_dist,
+                cfg.reaction_time,
+                cfg.max_deceleration,
+                cfg.max_obs_deceleration,
+            );
+            assert!(
+                (at - cfg.preferred_acceleration).abs() < 1e-9,
+                "v={v}: a_r(D) = {at}"
+            );
+            for &extra in &[1e-6, 1.0, 100.0] {
+                let with = longitudinal_accel(v, Some(d + extra), &[], &cfg).accel_mps2;
+                let without = longitudinal_accel(v, None, &[], &cfg).accel_mps2;
+                assert_eq!(with, without, "v={v} obstacle at D + {extra}");
+            }
+            // Any closer obstacle asks for less than a_pref: D is the smallest such gap.
+            let closer = stopping_accel(
+                v,
+                0.99 * d,
+                0.0,
+                cfg.preferred_stop_dist,
+                cfg.reaction_time,
+                cfg.max_deceleration,
+                cfg.max_obs_deceleration,
+            );
+            assert!(closer < cfg.preferred_acceleration, "v={v}: {closer}");
+        }
     }
 
     #[test]

@@ -111,10 +111,17 @@ impl<'a> From<&'a Trace> for Series<'a> {
 impl Series<'_> {
     fn len(&self) -> usize {
         // Columns of unequal length are cut to the shortest: never index past one.
-        [self.t_s.len(), self.lateral_error_m.len(), self.heading_error_rad.len(), self.delta_rad.len(), self.v_mps.len(), self.distance_m.len()]
-            .into_iter()
-            .min()
-            .unwrap_or(0)
+        [
+            self.t_s.len(),
+            self.lateral_error_m.len(),
+            self.heading_error_rad.len(),
+            self.delta_rad.len(),
+            self.v_mps.len(),
+            self.distance_m.len(),
+        ]
+        .into_iter()
+        .min()
+        .unwrap_or(0)
     }
 }
 
@@ -127,14 +134,19 @@ fn rms(sum_sq: f64, n: usize) -> f64 {
 }
 
 /// Metrics over samples `range` of `s`.
-pub fn window_metrics(s: &Series<'_>, range: std::ops::Range<usize>, wheelbase_m: f64) -> WindowMetrics {
+pub fn window_metrics(
+    s: &Series<'_>,
+    range: std::ops::Range<usize>,
+    wheelbase_m: f64,
+) -> WindowMetrics {
     let n_all = s.len();
     let range = range.start.min(n_all)..range.end.min(n_all);
     let n = range.len();
     if n == 0 {
         return WindowMetrics::default();
     }
-    let (mut sum_abs, mut sum_sq, mut max_abs, mut sum_h2, mut sum_speed, mut max_lat) = (0.0, 0.0, 0.0f64, 0.0, 0.0, 0.0f64);
+    let (mut sum_abs, mut sum_sq, mut max_abs, mut sum_h2, mut sum_speed, mut max_lat) =
+        (0.0, 0.0, 0.0f64, 0.0, 0.0, 0.0f64);
     let (mut sum_rate2, mut max_rate, mut n_rate) = (0.0, 0.0f64, 0usize);
     for i in range.clone() {
         let e = s.lateral_error_m[i];
@@ -155,7 +167,11 @@ pub fn window_metrics(s: &Series<'_>, range: std::ops::Range<usize>, wheelbase_m
             }
         }
     }
-    let before = if range.start == 0 { 0.0 } else { s.distance_m[range.start - 1] };
+    let before = if range.start == 0 {
+        0.0
+    } else {
+        s.distance_m[range.start - 1]
+    };
     WindowMetrics {
         lateral_error_mean_abs_m: sum_abs / n as f64,
         lateral_error_rms_m: rms(sum_sq, n),
@@ -173,7 +189,9 @@ pub fn window_metrics(s: &Series<'_>, range: std::ops::Range<usize>, wheelbase_m
 /// Index of the first sample from which |e| < `threshold_m` up to the end.
 pub fn settled_index(lateral_error_m: &[f64], threshold_m: f64) -> Option<usize> {
     // NaN compares false, so a NaN error counts as "not settled".
-    let last_bad = lateral_error_m.iter().rposition(|e| !(e.abs() < threshold_m));
+    let last_bad = lateral_error_m
+        .iter()
+        .rposition(|e| !(e.abs() < threshold_m));
     match last_bad {
         None if lateral_error_m.is_empty() => None,
         None => Some(0),
@@ -184,12 +202,17 @@ pub fn settled_index(lateral_error_m: &[f64], threshold_m: f64) -> Option<usize>
 
 /// `max(0, max_i(-sign(e_0) e_i))`, 0 if `e_0 = 0` (see the module docs).
 pub fn overshoot(lateral_error_m: &[f64]) -> f64 {
-    let Some(&e0) = lateral_error_m.first() else { return 0.0 };
+    let Some(&e0) = lateral_error_m.first() else {
+        return 0.0;
+    };
     if e0 == 0.0 || !e0.is_finite() {
         return 0.0;
     }
     let side = e0.signum();
-    lateral_error_m.iter().filter(|e| e.is_finite()).fold(0.0f64, |m, e| m.max(-side * e))
+    lateral_error_m
+        .iter()
+        .filter(|e| e.is_finite())
+        .fold(0.0f64, |m, e| m.max(-side * e))
 }
 
 /// All metrics of a series (see the module docs for the definitions).
@@ -235,10 +258,19 @@ impl RunMetrics {
             ("overshoot_m", self.overshoot_m),
             ("mean_speed_mps", w.mean_speed_mps),
             ("distance_m", w.distance_m),
-            ("lateral_error_mean_abs_m_settled", sv(|m| m.lateral_error_mean_abs_m)),
+            (
+                "lateral_error_mean_abs_m_settled",
+                sv(|m| m.lateral_error_mean_abs_m),
+            ),
             ("lateral_error_rms_m_settled", sv(|m| m.lateral_error_rms_m)),
-            ("lateral_error_max_abs_m_settled", sv(|m| m.lateral_error_max_abs_m)),
-            ("heading_error_rms_deg_settled", sv(|m| m.heading_error_rms_deg)),
+            (
+                "lateral_error_max_abs_m_settled",
+                sv(|m| m.lateral_error_max_abs_m),
+            ),
+            (
+                "heading_error_rms_deg_settled",
+                sv(|m| m.heading_error_rms_deg),
+            ),
         ]
     }
 }
@@ -251,10 +283,19 @@ impl RunMetrics {
         let rv = |f: fn(&WindowMetrics) -> f64| self.reached.as_ref().map(f).unwrap_or(nan);
         vec![
             ("reached_time_s", self.reached_time_s.unwrap_or(nan)),
-            ("lateral_error_mean_abs_m_reached", rv(|m| m.lateral_error_mean_abs_m)),
+            (
+                "lateral_error_mean_abs_m_reached",
+                rv(|m| m.lateral_error_mean_abs_m),
+            ),
             ("lateral_error_rms_m_reached", rv(|m| m.lateral_error_rms_m)),
-            ("lateral_error_max_abs_m_reached", rv(|m| m.lateral_error_max_abs_m)),
-            ("heading_error_rms_deg_reached", rv(|m| m.heading_error_rms_deg)),
+            (
+                "lateral_error_max_abs_m_reached",
+                rv(|m| m.lateral_error_max_abs_m),
+            ),
+            (
+                "heading_error_rms_deg_reached",
+                rv(|m| m.heading_error_rms_deg),
+            ),
         ]
     }
 }
@@ -279,10 +320,24 @@ mod tests {
             let n = e.len();
             let t: Vec<f64> = (1..=n).map(|i| i as f64 * 0.1).collect();
             let dist: Vec<f64> = (1..=n).map(|i| i as f64 * 0.2).collect();
-            Cols { t, e: e.to_vec(), h: vec![0.0; n], d: vec![0.0; n], v: vec![2.0; n], dist }
+            Cols {
+                t,
+                e: e.to_vec(),
+                h: vec![0.0; n],
+                d: vec![0.0; n],
+                v: vec![2.0; n],
+                dist,
+            }
         }
         fn series(&self) -> Series<'_> {
-            Series { t_s: &self.t, lateral_error_m: &self.e, heading_error_rad: &self.h, delta_rad: &self.d, v_mps: &self.v, distance_m: &self.dist }
+            Series {
+                t_s: &self.t,
+                lateral_error_m: &self.e,
+                heading_error_rad: &self.h,
+                delta_rad: &self.d,
+                v_mps: &self.v,
+                distance_m: &self.dist,
+            }
         }
     }
 
@@ -310,7 +365,11 @@ mod tests {
         let m = run_metrics(&c.series(), 2.6);
         assert_eq!(m.settled_index, Some(4));
         // t_4 = 0.5 s, first sample = one step (0.1 s) after the start.
-        assert!(close(m.settling_time_s.unwrap(), 0.5), "{:?}", m.settling_time_s);
+        assert!(
+            close(m.settling_time_s.unwrap(), 0.5),
+            "{:?}",
+            m.settling_time_s
+        );
         let s = m.settled.unwrap();
         assert_eq!(s.samples, 3);
         assert!(close(s.lateral_error_mean_abs_m, (0.09 + 0.05 + 0.0) / 3.0));
@@ -334,7 +393,12 @@ mod tests {
         assert!(m.settled.is_none());
         assert!(close(m.reached_time_s.unwrap(), 0.2));
         let named = m.to_named();
-        assert!(named.iter().find(|(k, _)| *k == "lateral_error_rms_m_settled").unwrap().1.is_nan());
+        assert!(named
+            .iter()
+            .find(|(k, _)| *k == "lateral_error_rms_m_settled")
+            .unwrap()
+            .1
+            .is_nan());
         let c = Cols::new(&[0.01, -0.02, 0.0]);
         let m = run_metrics(&c.series(), 2.6);
         assert_eq!(m.settled_index, Some(0));
@@ -366,7 +430,11 @@ mod tests {
         c.h = vec![0.1, -0.1, 0.1, -0.1, 0.1];
         let m = run_metrics(&c.series(), 2.0);
         let rms = ((0.01 + 0.01 + 0.0 + 0.04) / 4.0f64).sqrt().to_degrees();
-        assert!((m.whole.steering_rate_rms_deg_s - rms).abs() < 1e-9, "{} vs {rms}", m.whole.steering_rate_rms_deg_s);
+        assert!(
+            (m.whole.steering_rate_rms_deg_s - rms).abs() < 1e-9,
+            "{} vs {rms}",
+            m.whole.steering_rate_rms_deg_s
+        );
         assert!((m.whole.steering_rate_max_deg_s - 0.2f64.to_degrees()).abs() < 1e-9);
         assert!((m.whole.heading_error_rms_deg - 0.1f64.to_degrees()).abs() < 1e-9);
         // v = 2 m/s, E = 2 m: a_lat = 4 tan(0.02) / 2.
@@ -374,7 +442,10 @@ mod tests {
         // Backwards: same magnitude.
         c.v = vec![-2.0; 5];
         let mb = run_metrics(&c.series(), 2.0);
-        assert!(close(mb.whole.lateral_accel_max_mps2, m.whole.lateral_accel_max_mps2));
+        assert!(close(
+            mb.whole.lateral_accel_max_mps2,
+            m.whole.lateral_accel_max_mps2
+        ));
         assert!(close(mb.whole.mean_speed_mps, 2.0));
     }
 

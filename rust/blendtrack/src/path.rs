@@ -243,8 +243,8 @@ impl Path {
             length,
             chunk_boxes,
             tangent_sampling_width_m: 2.0,
-            window_back_m: 5.0,
-            window_ahead_m: 15.0,
+            window_back_m: 2.0,
+            window_ahead_m: 6.0,
         })
     }
 
