@@ -36,7 +36,10 @@ pub(crate) fn dict_to_toml(d: Option<&Bound<'_, PyDict>>) -> PyResult<toml::Tabl
                 // numpy scalars and other numbers.
                 toml::Value::Float(f)
             } else {
-                return Err(PyTypeError::new_err(format!("`{key}`: unsupported value type {}", v.get_type().name()?)));
+                return Err(PyTypeError::new_err(format!(
+                    "`{key}`: unsupported value type {}",
+                    v.get_type().name()?
+                )));
             };
             t.insert(key, val);
         }
@@ -45,8 +48,16 @@ pub(crate) fn dict_to_toml(d: Option<&Bound<'_, PyDict>>) -> PyResult<toml::Tabl
 }
 
 /// Deserializes a core type from a TOML table; errors name the key.
-pub(crate) fn from_table<T: serde::de::DeserializeOwned>(t: toml::Table, what: &str) -> PyResult<T> {
-    T::deserialize(toml::Value::Table(t)).map_err(|e| PyConfigError::new_err(format!("{what}: {}", e.to_string().trim_end().replace('\n', " | "))))
+pub(crate) fn from_table<T: serde::de::DeserializeOwned>(
+    t: toml::Table,
+    what: &str,
+) -> PyResult<T> {
+    T::deserialize(toml::Value::Table(t)).map_err(|e| {
+        PyConfigError::new_err(format!(
+            "{what}: {}",
+            e.to_string().trim_end().replace('\n', " | ")
+        ))
+    })
 }
 
 /// TOML value -> Python object.
@@ -71,16 +82,24 @@ fn to_dict<'py, T: serde::Serialize>(py: Python<'py>, v: &T) -> PyResult<Bound<'
 
 /// Parses TOML text: the `[table]` if the document has one, else its top-level keys.
 fn parse_section(text: &str, source: &str, table: &str) -> PyResult<toml::Table> {
-    let mut doc: toml::Table = text.parse().map_err(|e: toml::de::Error| PyConfigError::new_err(format!("{source}: {}", e.to_string().trim_end().replace('\n', " | "))))?;
+    let mut doc: toml::Table = text.parse().map_err(|e: toml::de::Error| {
+        PyConfigError::new_err(format!(
+            "{source}: {}",
+            e.to_string().trim_end().replace('\n', " | ")
+        ))
+    })?;
     match doc.remove(table) {
         Some(toml::Value::Table(t)) => Ok(t),
-        Some(_) => Err(PyConfigError::new_err(format!("{source}: `{table}` must be a table"))),
+        Some(_) => Err(PyConfigError::new_err(format!(
+            "{source}: `{table}` must be a table"
+        ))),
         None => Ok(doc),
     }
 }
 
 fn read_file(file: &str) -> PyResult<String> {
-    std::fs::read_to_string(file).map_err(|e| PyConfigError::new_err(format!("cannot read config file {file}: {e}")))
+    std::fs::read_to_string(file)
+        .map_err(|e| PyConfigError::new_err(format!("cannot read config file {file}: {e}")))
 }
 
 /// Parameters of the lateral and longitudinal controllers (the paper's
@@ -166,7 +185,11 @@ impl ControllerConfig {
         let direction = match self.direction.as_str() {
             "forward" => Direction::Forward,
             "backward" => Direction::Backward,
-            other => return Err(PyConfigError::new_err(format!("config key `direction` = {other:?}: must be \"forward\" or \"backward\""))),
+            other => {
+                return Err(PyConfigError::new_err(format!(
+                    "config key `direction` = {other:?}: must be \"forward\" or \"backward\""
+                )))
+            }
         };
         let lateral_controller = match self.lateral_controller.as_str() {
             "blend" => LateralKind::Blend,
@@ -209,7 +232,8 @@ impl ControllerConfig {
     }
 
     fn with_kwargs(base: &Core, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let mut t = toml::Table::try_from(base).map_err(|e| PyConfigError::new_err(e.to_string()))?;
+        let mut t =
+            toml::Table::try_from(base).map_err(|e| PyConfigError::new_err(e.to_string()))?;
         t.extend(dict_to_toml(kwargs)?);
         let c: Core = from_table(t, "ControllerConfig")?;
         c.validate().map_err(config_error)?;
@@ -261,7 +285,9 @@ impl ControllerConfig {
     fn to_toml(&self, table: bool) -> PyResult<String> {
         let c = self.to_core()?;
         if table {
-            toml::to_string(&c).map(|s| format!("[controller]\n{s}")).map_err(|e| PyConfigError::new_err(e.to_string()))
+            toml::to_string(&c)
+                .map(|s| format!("[controller]\n{s}"))
+                .map_err(|e| PyConfigError::new_err(e.to_string()))
         } else {
             toml::to_string(&c).map_err(|e| PyConfigError::new_err(e.to_string()))
         }
@@ -326,7 +352,8 @@ impl VehicleParams {
     }
 
     fn with_kwargs(base: &CoreVehicle, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let mut t = toml::Table::try_from(base).map_err(|e| PyConfigError::new_err(e.to_string()))?;
+        let mut t =
+            toml::Table::try_from(base).map_err(|e| PyConfigError::new_err(e.to_string()))?;
         t.extend(dict_to_toml(kwargs)?);
         let v: CoreVehicle = from_table(t, "VehicleParams")?;
         blendtrack::config::validate_vehicle(&v).map_err(config_error)?;
@@ -388,5 +415,8 @@ impl VehicleParams {
 #[pyfunction]
 pub(crate) fn load_config(file: std::path::PathBuf) -> PyResult<(ControllerConfig, VehicleParams)> {
     let c = CoreConfig::load(&file).map_err(config_error)?;
-    Ok((ControllerConfig::from(&c.controller), VehicleParams::from(&c.vehicle)))
+    Ok((
+        ControllerConfig::from(&c.controller),
+        VehicleParams::from(&c.vehicle),
+    ))
 }

@@ -35,14 +35,21 @@ pub struct Fleet {
 impl Fleet {
     #[new]
     fn new() -> Self {
-        Fleet { inner: CoreFleet::new() }
+        Fleet {
+            inner: CoreFleet::new(),
+        }
     }
 
     /// Registers a track (path + corridor built from `config`, default
     /// `ControllerConfig()`), whose config is also the default of its
     /// vehicles. Returns the track id.
     #[pyo3(signature = (path, config = None))]
-    fn add_track(&mut self, py: Python<'_>, path: &Path, config: Option<ControllerConfig>) -> PyResult<usize> {
+    fn add_track(
+        &mut self,
+        py: Python<'_>,
+        path: &Path,
+        config: Option<ControllerConfig>,
+    ) -> PyResult<usize> {
         let cfg = config.map(|c| c.to_core()).transpose()?.unwrap_or_default();
         let p = path.inner.clone();
         let inner = &mut self.inner;
@@ -51,10 +58,17 @@ impl Fleet {
 
     /// Adds a vehicle on track `track_id`; returns its slot (the lowest free one).
     #[pyo3(signature = (track_id, config = None, vehicle = None))]
-    fn add_vehicle(&mut self, track_id: i64, config: Option<ControllerConfig>, vehicle: Option<VehicleParams>) -> PyResult<usize> {
+    fn add_vehicle(
+        &mut self,
+        track_id: i64,
+        config: Option<ControllerConfig>,
+        vehicle: Option<VehicleParams>,
+    ) -> PyResult<usize> {
         let cfg = config.map(|c| c.to_core()).transpose()?;
         let params = vehicle.map(|v| v.to_core()).transpose()?;
-        self.inner.add_vehicle(track_id, cfg, params).map_err(fleet_error)
+        self.inner
+            .add_vehicle(track_id, cfg, params)
+            .map_err(fleet_error)
     }
 
     /// Frees a slot (its number may be handed out again by `add_vehicle`).
@@ -74,11 +88,17 @@ impl Fleet {
     }
 
     fn vehicle_config(&self, slot: i64) -> PyResult<ControllerConfig> {
-        self.inner.vehicle_config(slot).map(ControllerConfig::from).map_err(fleet_error)
+        self.inner
+            .vehicle_config(slot)
+            .map(ControllerConfig::from)
+            .map_err(fleet_error)
     }
 
     fn vehicle_params(&self, slot: i64) -> PyResult<VehicleParams> {
-        self.inner.vehicle_params(slot).map(VehicleParams::from).map_err(fleet_error)
+        self.inner
+            .vehicle_params(slot)
+            .map(VehicleParams::from)
+            .map_err(fleet_error)
     }
 
     fn vehicle_track(&self, slot: i64) -> PyResult<usize> {
@@ -87,7 +107,10 @@ impl Fleet {
 
     /// Slots in use, ascending.
     fn slots<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
-        PyArray1::from_vec(py, self.inner.slots().into_iter().map(|s| s as i64).collect())
+        PyArray1::from_vec(
+            py,
+            self.inner.slots().into_iter().map(|s| s as i64).collect(),
+        )
     }
 
     #[getter]
@@ -122,9 +145,19 @@ impl Fleet {
         dt: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         if dt.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
-            return Err(input_error(format!("argument `dt` = {}: must be finite and > 0", dt.unwrap_or_default())));
+            return Err(input_error(format!(
+                "argument `dt` = {}: must be finite and > 0",
+                dt.unwrap_or_default()
+            )));
         }
-        let (sl, xs, ys, ths, vs, ds) = (slice(&slots), slice(&x), slice(&y), slice(&theta), slice(&v), slice(&delta));
+        let (sl, xs, ys, ths, vs, ds) = (
+            slice(&slots),
+            slice(&x),
+            slice(&y),
+            slice(&theta),
+            slice(&v),
+            slice(&delta),
+        );
         let al = alpha.as_ref().map(|a| slice(a));
         let lg = leader_gap.as_ref().map(|a| slice(a));
         let ls = leader_speed.as_ref().map(|a| slice(a));
@@ -159,7 +192,13 @@ impl Fleet {
             d.set_item(k, PyArray1::from_vec(py, col))?;
         }
         if let Some(n) = out.next {
-            for (k, col) in [("x_m", n.x_m), ("y_m", n.y_m), ("theta_rad", n.theta_rad), ("v_mps", n.v_mps), ("delta_rad", n.delta_rad)] {
+            for (k, col) in [
+                ("x_m", n.x_m),
+                ("y_m", n.y_m),
+                ("theta_rad", n.theta_rad),
+                ("v_mps", n.v_mps),
+                ("delta_rad", n.delta_rad),
+            ] {
                 d.set_item(k, PyArray1::from_vec(py, col))?;
             }
         }
@@ -167,6 +206,10 @@ impl Fleet {
     }
 
     fn __repr__(&self) -> String {
-        format!("Fleet(tracks={}, vehicles={})", self.inner.n_tracks(), self.inner.len())
+        format!(
+            "Fleet(tracks={}, vehicles={})",
+            self.inner.n_tracks(),
+            self.inner.len()
+        )
     }
 }

@@ -17,7 +17,10 @@ pub struct Path {
 fn rows(a: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<Vec<[f64; 2]>> {
     let shape = a.shape();
     if shape[1] != 2 {
-        return Err(crate::errors::input_error(format!("`{name}` must have shape (N, 2), got ({}, {})", shape[0], shape[1])));
+        return Err(crate::errors::input_error(format!(
+            "`{name}` must have shape (N, 2), got ({}, {})",
+            shape[0], shape[1]
+        )));
     }
     let v = a.as_array();
     Ok((0..shape[0]).map(|i| [v[[i, 0]], v[[i, 1]]]).collect())
@@ -28,20 +31,36 @@ impl Path {
     /// From an (N, 2) array of x, y (m); `widths` (N, 2) = right, left (m).
     #[new]
     #[pyo3(signature = (points, widths = None, closed = false))]
-    fn new(points: PyReadonlyArray2<'_, f64>, widths: Option<PyReadonlyArray2<'_, f64>>, closed: bool) -> PyResult<Self> {
+    fn new(
+        points: PyReadonlyArray2<'_, f64>,
+        widths: Option<PyReadonlyArray2<'_, f64>>,
+        closed: bool,
+    ) -> PyResult<Self> {
         let pts = rows(&points, "points")?;
         let ws: Option<Vec<Widths>> = match widths {
-            Some(w) => Some(rows(&w, "widths")?.into_iter().map(|[r, l]| Widths { right_m: r, left_m: l }).collect()),
+            Some(w) => Some(
+                rows(&w, "widths")?
+                    .into_iter()
+                    .map(|[r, l]| Widths {
+                        right_m: r,
+                        left_m: l,
+                    })
+                    .collect(),
+            ),
             None => None,
         };
-        Ok(Path { inner: CorePath::new(&pts, ws.as_deref(), closed).map_err(path_error)? })
+        Ok(Path {
+            inner: CorePath::new(&pts, ws.as_deref(), closed).map_err(path_error)?,
+        })
     }
 
     /// Reads a TUM race-track csv (`x_m,y_m,w_tr_right_m,w_tr_left_m`).
     #[staticmethod]
     #[pyo3(signature = (file, closed = true))]
     fn from_tum_csv(py: Python<'_>, file: std::path::PathBuf, closed: bool) -> PyResult<Self> {
-        let p = py.detach(|| CorePath::from_tum_csv(&file, closed)).map_err(path_error)?;
+        let p = py
+            .detach(|| CorePath::from_tum_csv(&file, closed))
+            .map_err(path_error)?;
         Ok(Path { inner: p })
     }
 
@@ -49,26 +68,34 @@ impl Path {
     #[staticmethod]
     #[pyo3(signature = (length_m, spacing_m = 1.0))]
     fn straight(length_m: f64, spacing_m: f64) -> PyResult<Self> {
-        Ok(Path { inner: CorePath::straight(length_m, spacing_m).map_err(path_error)? })
+        Ok(Path {
+            inner: CorePath::straight(length_m, spacing_m).map_err(path_error)?,
+        })
     }
 
     /// A closed counter-clockwise circle through the origin heading +x.
     #[staticmethod]
     #[pyo3(signature = (radius_m, max_sagitta_m = 0.001))]
     fn circle(radius_m: f64, max_sagitta_m: f64) -> PyResult<Self> {
-        Ok(Path { inner: CorePath::circle(radius_m, max_sagitta_m).map_err(path_error)? })
+        Ok(Path {
+            inner: CorePath::circle(radius_m, max_sagitta_m).map_err(path_error)?,
+        })
     }
 
     /// The built-in closed test track (about 1.2 km, radii 25 to 40 m, clothoids).
     #[staticmethod]
     #[pyo3(signature = (spacing_m = 1.0))]
     fn test_track(spacing_m: f64) -> PyResult<Self> {
-        Ok(Path { inner: CorePath::test_track(spacing_m).map_err(path_error)? })
+        Ok(Path {
+            inner: CorePath::test_track(spacing_m).map_err(path_error)?,
+        })
     }
 
     /// A copy with every coordinate and width multiplied by `factor`.
     fn scaled(&self, factor: f64) -> PyResult<Self> {
-        Ok(Path { inner: self.inner.scaled(factor).map_err(path_error)? })
+        Ok(Path {
+            inner: self.inner.scaled(factor).map_err(path_error)?,
+        })
     }
 
     #[getter]
@@ -89,15 +116,24 @@ impl Path {
 
     /// The vertices as an (N, 2) array.
     fn points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
-        let flat: Vec<f64> = self.inner.points().iter().flat_map(|p| [p.x, p.y]).collect();
-        PyArray1::from_vec(py, flat).reshape([self.inner.len_points(), 2]).expect("N*2 elements")
+        let flat: Vec<f64> = self
+            .inner
+            .points()
+            .iter()
+            .flat_map(|p| [p.x, p.y])
+            .collect();
+        PyArray1::from_vec(py, flat)
+            .reshape([self.inner.len_points(), 2])
+            .expect("N*2 elements")
     }
 
     /// The (N, 2) widths (right, left), or None.
     fn widths<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
         self.inner.widths().map(|w| {
             let flat: Vec<f64> = w.iter().flat_map(|w| [w.right_m, w.left_m]).collect();
-            PyArray1::from_vec(py, flat).reshape([w.len(), 2]).expect("N*2 elements")
+            PyArray1::from_vec(py, flat)
+                .reshape([w.len(), 2])
+                .expect("N*2 elements")
         })
     }
 

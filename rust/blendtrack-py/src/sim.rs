@@ -14,9 +14,11 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
 
-
 /// The 15 `metrics.json` metrics, then the extra ones, as a dict (NaN where undefined).
-pub(crate) fn metrics_dict<'py>(py: Python<'py>, m: &blendtrack::RunMetrics) -> PyResult<Bound<'py, PyDict>> {
+pub(crate) fn metrics_dict<'py>(
+    py: Python<'py>,
+    m: &blendtrack::RunMetrics,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     for (k, v) in m.to_named().into_iter().chain(m.to_named_extra()) {
         d.set_item(k, v)?;
@@ -24,10 +26,18 @@ pub(crate) fn metrics_dict<'py>(py: Python<'py>, m: &blendtrack::RunMetrics) -> 
     Ok(d)
 }
 
-fn alpha_schedule(alpha: Option<f64>, alpha_sine_omega: Option<f64>, alpha_knots: Option<(PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>)>, default: f64) -> PyResult<AlphaSchedule> {
-    let given = alpha.is_some() as u8 + alpha_sine_omega.is_some() as u8 + alpha_knots.is_some() as u8;
+fn alpha_schedule(
+    alpha: Option<f64>,
+    alpha_sine_omega: Option<f64>,
+    alpha_knots: Option<(PyReadonlyArray1<'_, f64>, PyReadonlyArray1<'_, f64>)>,
+    default: f64,
+) -> PyResult<AlphaSchedule> {
+    let given =
+        alpha.is_some() as u8 + alpha_sine_omega.is_some() as u8 + alpha_knots.is_some() as u8;
     if given > 1 {
-        return Err(input_error("give at most one of `alpha`, `alpha_sine_omega`, `alpha_knots`"));
+        return Err(input_error(
+            "give at most one of `alpha`, `alpha_sine_omega`, `alpha_knots`",
+        ));
     }
     let s = if let Some(a) = alpha {
         AlphaSchedule::Constant { alpha: a }
@@ -36,13 +46,20 @@ fn alpha_schedule(alpha: Option<f64>, alpha_sine_omega: Option<f64>, alpha_knots
     } else if let Some((t, a)) = alpha_knots {
         let (t, a) = (t.as_array(), a.as_array());
         if t.len() != a.len() {
-            return Err(input_error(format!("`alpha_knots`: {} times but {} values", t.len(), a.len())));
+            return Err(input_error(format!(
+                "`alpha_knots`: {} times but {} values",
+                t.len(),
+                a.len()
+            )));
         }
-        AlphaSchedule::Piecewise { knots: t.iter().copied().zip(a.iter().copied()).collect() }
+        AlphaSchedule::Piecewise {
+            knots: t.iter().copied().zip(a.iter().copied()).collect(),
+        }
     } else {
         AlphaSchedule::Constant { alpha: default }
     };
-    s.validate().map_err(|m| crate::errors::ConfigError::new_err(format!("alpha schedule: {m}")))?;
+    s.validate()
+        .map_err(|m| crate::errors::ConfigError::new_err(format!("alpha schedule: {m}")))?;
     Ok(s)
 }
 
@@ -75,7 +92,10 @@ pub(crate) fn simulate<'py>(
     fixed_speed_mps: Option<f64>,
 ) -> PyResult<(Bound<'py, PyDict>, Bound<'py, PyDict>)> {
     let cfg = config.map(|c| c.to_core()).transpose()?.unwrap_or_default();
-    let params = vehicle.map(|v| v.to_core()).transpose()?.unwrap_or_default();
+    let params = vehicle
+        .map(|v| v.to_core())
+        .transpose()?
+        .unwrap_or_default();
     let schedule = alpha_schedule(alpha, alpha_sine_omega, alpha_knots, cfg.lat_blend_factor)?;
     let noise: NoiseModel = match noise {
         None => NoiseModel::None,
@@ -141,17 +161,42 @@ pub(crate) fn compute_metrics<'py>(
     wheelbase_m: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let n = t_s.len();
-    let cols = [("lateral_error_m", &lateral_error_m), ("heading_error_rad", &heading_error_rad), ("delta_rad", &delta_rad), ("v_mps", &v_mps), ("distance_m", &distance_m)];
+    let cols = [
+        ("lateral_error_m", &lateral_error_m),
+        ("heading_error_rad", &heading_error_rad),
+        ("delta_rad", &delta_rad),
+        ("v_mps", &v_mps),
+        ("distance_m", &distance_m),
+    ];
     for (name, c) in cols {
         if c.len() != n {
-            return Err(input_error(format!("argument `{name}` has {} entries, expected {n} (as `t_s`)", c.len())));
+            return Err(input_error(format!(
+                "argument `{name}` has {} entries, expected {n} (as `t_s`)",
+                c.len()
+            )));
         }
     }
     if !(wheelbase_m.is_finite() && wheelbase_m > 0.0) {
-        return Err(input_error(format!("argument `wheelbase_m` = {wheelbase_m}: must be > 0")));
+        return Err(input_error(format!(
+            "argument `wheelbase_m` = {wheelbase_m}: must be > 0"
+        )));
     }
     let v = |a: &PyReadonlyArray1<'py, f64>| a.as_array().to_vec();
-    let (t, e, h, d, s, dist) = (v(&t_s), v(&lateral_error_m), v(&heading_error_rad), v(&delta_rad), v(&v_mps), v(&distance_m));
-    let series = Series { t_s: &t, lateral_error_m: &e, heading_error_rad: &h, delta_rad: &d, v_mps: &s, distance_m: &dist };
+    let (t, e, h, d, s, dist) = (
+        v(&t_s),
+        v(&lateral_error_m),
+        v(&heading_error_rad),
+        v(&delta_rad),
+        v(&v_mps),
+        v(&distance_m),
+    );
+    let series = Series {
+        t_s: &t,
+        lateral_error_m: &e,
+        heading_error_rad: &h,
+        delta_rad: &d,
+        v_mps: &s,
+        distance_m: &dist,
+    };
     metrics_dict(py, &run_metrics(&series, wheelbase_m))
 }

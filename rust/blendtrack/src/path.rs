@@ -243,8 +243,8 @@ impl Path {
             length,
             chunk_boxes,
             tangent_sampling_width_m: 2.0,
-            window_back_m: 2.0,
-            window_ahead_m: 6.0,
+            window_back_m: 1.0,
+            window_ahead_m: 3.0,
         })
     }
 
@@ -552,6 +552,20 @@ impl Path {
     fn locate(&self, s: f64) -> (usize, f64) {
         let s = self.wrap_s(s);
         let n_seg = self.seg_len.len();
+        // Interpolation guess (exact for evenly sampled paths), a few steps of
+        // walking, then binary search: O(1) for the paths we build.
+        if s.is_finite() && s > 0.0 {
+            let mut k = (((s / self.length) * n_seg as f64) as usize).min(n_seg - 1);
+            for _ in 0..4 {
+                if s < self.s[k] {
+                    k -= 1; // s > 0 = s[0], so k > 0 here
+                } else if k + 1 < n_seg && s >= self.s[k + 1] {
+                    k += 1;
+                } else {
+                    return (k, s - self.s[k]);
+                }
+            }
+        }
         let k = self.s[1..n_seg].partition_point(|&b| b <= s);
         (k, s - self.s[k])
     }
