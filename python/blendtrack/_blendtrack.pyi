@@ -189,5 +189,6 @@ class Fleet:
         leader_gap: _ArrayLike | None = None,
         leader_speed: _ArrayLike | None = None,
         stop_gap: _ArrayLike | None = None,
+        speed_limit: _ArrayLike | None = None,
         dt: float | None = None,
     ) -> dict[str, npt.NDArray[Any]]: ...

@@ -124,10 +124,10 @@ impl Fleet {
 
     /// One control step for the listed slots (see the class docs). Returns a
     /// dict of arrays in the order of `slots`: ok, steering_rad, accel_mps2,
-    /// alpha, lateral_error_m, heading_error_rad, s_m, curvature_per_m,
+    /// alpha, lateral_error_m, heading_error_rad, s_m, s_rear_m, curvature_per_m,
     /// virtual_obstacle_m, and with `dt` the next state x_m, y_m, theta_rad,
     /// v_mps, delta_rad.
-    #[pyo3(signature = (slots, x, y, theta, v, delta, alpha = None, leader_gap = None, leader_speed = None, stop_gap = None, dt = None))]
+    #[pyo3(signature = (slots, x, y, theta, v, delta, alpha = None, leader_gap = None, leader_speed = None, stop_gap = None, speed_limit = None, dt = None))]
     #[allow(clippy::too_many_arguments)]
     fn step<'py>(
         &mut self,
@@ -142,6 +142,7 @@ impl Fleet {
         leader_gap: Option<F64In<'py>>,
         leader_speed: Option<F64In<'py>>,
         stop_gap: Option<F64In<'py>>,
+        speed_limit: Option<F64In<'py>>,
         dt: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         if dt.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
@@ -162,6 +163,7 @@ impl Fleet {
         let lg = leader_gap.as_ref().map(|a| slice(a));
         let ls = leader_speed.as_ref().map(|a| slice(a));
         let sg = stop_gap.as_ref().map(|a| slice(a));
+        let sp = speed_limit.as_ref().map(|a| slice(a));
         let inputs = FleetInputs {
             slots: &sl,
             x_m: &xs,
@@ -173,6 +175,7 @@ impl Fleet {
             leader_gap_m: lg.as_deref(),
             leader_speed_mps: ls.as_deref(),
             stop_gap_m: sg.as_deref(),
+            speed_limit_mps: sp.as_deref(),
             dt_s: dt,
         };
         let inner = &mut self.inner;
@@ -186,6 +189,7 @@ impl Fleet {
             ("lateral_error_m", out.lateral_error_m),
             ("heading_error_rad", out.heading_error_rad),
             ("s_m", out.s_m),
+            ("s_rear_m", out.s_rear_m),
             ("curvature_per_m", out.curvature_per_m),
             ("virtual_obstacle_m", out.virtual_obstacle_m),
         ] {

@@ -137,6 +137,27 @@ impl Controller {
         self.step_with_alpha(measured, self.cfg.lat_blend_factor, obstacles)
     }
 
+    /// One step under a speed limit: the free-flow law aims at
+    /// `min(preferred_speed, speed_limit_mps)` (SUMO lanes carry their limit).
+    pub fn step_limited(
+        &mut self,
+        measured: &VehicleState,
+        alpha: f64,
+        obstacles: &[Obstacle],
+        speed_limit_mps: Option<f64>,
+    ) -> Result<ControlOutput, StateError> {
+        match speed_limit_mps {
+            Some(limit) if limit > 0.0 && limit < self.cfg.preferred_speed => {
+                let saved = self.cfg.preferred_speed;
+                self.cfg.preferred_speed = limit;
+                let out = self.step_with_alpha(measured, alpha, obstacles);
+                self.cfg.preferred_speed = saved;
+                out
+            }
+            _ => self.step_with_alpha(measured, alpha, obstacles),
+        }
+    }
+
     /// One step with blend factor `alpha` (in [0, 1]; it may change every step).
     pub fn step_with_alpha(
         &mut self,

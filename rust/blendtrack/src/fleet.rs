@@ -82,6 +82,9 @@ pub struct FleetInputs<'a> {
     pub leader_speed_mps: Option<&'a [f64]>,
     /// Gap to a stop line (m; NaN/inf = none).
     pub stop_gap_m: Option<&'a [f64]>,
+    /// Speed limit where the vehicle is (m/s; NaN/inf = none): the free-flow
+    /// law aims at `min(preferred_speed, limit)`.
+    pub speed_limit_mps: Option<&'a [f64]>,
     /// When given, the next state is integrated over this time step (s).
     pub dt_s: Option<f64>,
 }
@@ -107,6 +110,7 @@ impl<'a> FleetInputs<'a> {
             leader_gap_m: None,
             leader_speed_mps: None,
             stop_gap_m: None,
+            speed_limit_mps: None,
             dt_s: None,
         }
     }
@@ -126,6 +130,8 @@ pub struct FleetOutputs {
     pub lateral_error_m: Vec<f64>,
     pub heading_error_rad: Vec<f64>,
     pub s_m: Vec<f64>,
+    /// Arc length of the rear axle's foot point.
+    pub s_rear_m: Vec<f64>,
     pub curvature_per_m: Vec<f64>,
     /// Distance to the virtual obstacle (m, +inf on free road).
     pub virtual_obstacle_m: Vec<f64>,
@@ -311,7 +317,7 @@ impl Fleet {
     /// Checks the call (lengths, slots, dt) before anything moves.
     fn check(&mut self, inp: &FleetInputs<'_>) -> Result<(), FleetError> {
         let n = inp.slots.len();
-        let cols: [(&'static str, Option<&[f64]>); 9] = [
+        let cols: [(&'static str, Option<&[f64]>); 10] = [
             ("x", Some(inp.x_m)),
             ("y", Some(inp.y_m)),
             ("theta", Some(inp.theta_rad)),
@@ -321,6 +327,7 @@ impl Fleet {
             ("leader_gap", inp.leader_gap_m),
             ("leader_speed", inp.leader_speed_mps),
             ("stop_gap", inp.stop_gap_m),
+            ("speed_limit", inp.speed_limit_mps),
         ];
         for (argument, col) in cols {
             if let Some(c) = col {
@@ -412,6 +419,7 @@ impl Fleet {
             lateral_error_m: col(|r| r.lateral_error_m),
             heading_error_rad: col(|r| r.heading_error_rad),
             s_m: col(|r| r.s_m),
+            s_rear_m: col(|r| r.s_rear_m),
             curvature_per_m: col(|r| r.curvature_per_m),
             virtual_obstacle_m: col(|r| r.virtual_obstacle_m),
             next: inp.dt_s.map(|_| NextStates {
@@ -439,6 +447,7 @@ struct Row {
     lateral_error_m: f64,
     heading_error_rad: f64,
     s_m: f64,
+    s_rear_m: f64,
     curvature_per_m: f64,
     virtual_obstacle_m: f64,
     next: VehicleState,
@@ -455,6 +464,7 @@ impl Default for Row {
             lateral_error_m: nan,
             heading_error_rad: nan,
             s_m: nan,
+            s_rear_m: nan,
             curvature_per_m: nan,
             virtual_obstacle_m: nan,
             next: VehicleState {
@@ -506,9 +516,11 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
         };
         n_obs += 1;
     }
+    let limit = opt(inp.speed_limit_mps);
+    let limit = if limit.is_finite() && limit > 0.0 { Some(limit) } else { None };
     let Ok(o) = e
         .controller
-        .step_with_alpha(&state, alpha, &obstacles[..n_obs])
+        .step_limited(&state, alpha, &obstacles[..n_obs], limit)
     else {
         return Row::default();
     };
@@ -534,6 +546,7 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
         lateral_error_m: o.lateral_error_m,
         heading_error_rad: o.heading_error_rad,
         s_m: o.s_m,
+        s_rear_m: o.s_rear_m,
         curvature_per_m: o.curvature_per_m,
         virtual_obstacle_m: o.virtual_obstacle_m,
         next,
@@ -844,5 +857,32 @@ mod tests {
             .step(&FleetInputs::new(&[], &[], &[], &[], &[], &[]))
             .unwrap();
         assert!(out.ok.is_empty());
+    }
+
+    #[test]
+    fn speed_limit_caps_the_free_flow_target() {
+        let mut fleet = Fleet::new();
+        let cfg = ControllerConfig { preferred_speed: 10.0, ..Default::default() };
+        let t = fleet.add_track(Path::straight(5000.0, 5.0).unwrap(), cfg.clone()).unwrap();
+        let a = fleet.add_vehicle(t as i64, None, None).unwrap() as i64;
+        let b = fleet.add_vehicle(t as i64, None, None).unwrap() as i64;
+        let mut st = [(0.0, 0.0, 0.0, 0.0, 0.0); 2];
+        st[1].1 = 3.0;
+        for _ in 0..1500 {
+            let slots = [a, b];
+            let cols: Vec<Vec<f64>> = (0..5).map(|k| st.iter().map(|s| [s.0, s.1, s.2, s.3, s.4][k]).collect()).collect();
+            let limit = [f64::NAN, 5.0];
+            let mut inp = FleetInputs::new(&slots, &cols[0], &cols[1], &cols[2], &cols[3], &cols[4]);
+            inp.speed_limit_mps = Some(&limit);
+            inp.dt_s = Some(0.1);
+            let out = fleet.step(&inp).unwrap();
+            let n = out.next.unwrap();
+            for i in 0..2 {
+                st[i] = (n.x_m[i], n.y_m[i], n.theta_rad[i], n.v_mps[i], n.delta_rad[i]);
+            }
+            assert!(out.s_rear_m[0] <= out.s_m[0] + 1e-9, "the control point is ahead of the rear axle");
+        }
+        assert!((st[0].3 - 10.0).abs() < 0.2, "no limit: preferred speed, got {}", st[0].3);
+        assert!((st[1].3 - 5.0).abs() < 0.1, "limited to 5 m/s, got {}", st[1].3);
     }
 }
