@@ -27,6 +27,7 @@ from blendtrack._blendtrack import (
     __version__,
     compute_metrics,
     load_config,
+    stopping_accel,
 )
 from blendtrack.simulation import METRIC_KEYS, load_track, parse_noise, simulate
 
@@ -47,4 +48,5 @@ __all__ = [
     "load_track",
     "parse_noise",
     "simulate",
+    "stopping_accel",
 ]

@@ -23,6 +23,7 @@ __all__ = [
     "load_config",
     "simulate",
     "compute_metrics",
+    "stopping_accel",
     "Fleet",
 ]
 
@@ -192,3 +193,5 @@ class Fleet:
         speed_limit: _ArrayLike | None = None,
         dt: float | None = None,
     ) -> dict[str, npt.NDArray[Any]]: ...
+
+def stopping_accel(v_mps: float, gap_m: float, v_l_mps: float, s0_m: float, tau_s: float, b_f_mps2: float, b_l_mps2: float) -> float: ...

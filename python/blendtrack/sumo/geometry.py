@@ -48,13 +48,23 @@ class RouteGeometry:
     #: Edge id of each piece, and the lane index within it.
     piece_edge: list[str]
     piece_index: list[int]
+    #: Speed limit of each piece (m/s).
+    piece_speed: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: SUMO's lane length over the piece's geometric length: maps an arc
+    #: length inside a piece to SUMO's lane position.
+    piece_scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: True where the piece follows its SUMO lane's centreline exactly
+    #: (a normal lane, not a junction lane nor a lane change), so that a
+    #: position on it can be given to SUMO as (lane, position).
+    piece_plain: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: Traffic-light stop lines along the track: (arc length of the stop
+    #: line, traffic light id, link index), sorted by arc length.
+    stops: list[tuple[float, str, int]] = field(default_factory=list)
     #: Route edges this geometry was built for.
     edges: tuple[str, ...] = field(default_factory=tuple)
 
-    @property
-    def length_m(self) -> float:
-        d = np.diff(self.points, axis=0)
-        return float(np.hypot(d[:, 0], d[:, 1]).sum())
+    #: Total arc length (m).
+    length_m: float = 0.0
 
     def lane_at(self, s: float) -> tuple[str, int, str]:
         """(edge id, lane index, lane id) of the piece holding arc length ``s``."""
@@ -126,6 +136,11 @@ class _Piece:
     edge: str
     index: int
     lane: str
+    speed_mps: float
+    length_m: float
+    plain: bool
+    #: (traffic light id, link index) when this piece starts at a signalised stop line.
+    tls: tuple[str, int] | None = None
 
 
 def _pieces(net: Any, edges: Sequence[str], start_index: int, spacing_m: float) -> list[_Piece]:
@@ -144,9 +159,19 @@ def _pieces(net: Any, edges: Sequence[str], start_index: int, spacing_m: float) 
         return [c for c in lane.getOutgoing() if c.getTo() is objs[k]]
 
     def piece(lane: Any, shape: np.ndarray | None = None) -> _Piece:
+        plain = shape is None and not lane.getID().startswith(":")
         if shape is None:
             shape = _resample(np.asarray(lane.getShape(), dtype=float), spacing_m)
-        return _Piece(shape, 0.5 * float(lane.getWidth()), lane.getEdge().getID(), lane.getIndex(), lane.getID())
+        return _Piece(
+            shape,
+            0.5 * float(lane.getWidth()),
+            lane.getEdge().getID(),
+            lane.getIndex(),
+            lane.getID(),
+            float(lane.getSpeed()),
+            float(lane.getLength()),
+            plain,
+        )
 
     out: list[_Piece] = []
     lane = objs[0].getLane(min(max(start_index, 0), objs[0].getLaneNumber() - 1))
@@ -171,7 +196,11 @@ def _pieces(net: Any, edges: Sequence[str], start_index: int, spacing_m: float) 
         # Prefer a connection whose lane goes on to the edge after next.
         onward = [c for c in cs if conns_to(c.getToLane(), k + 2)] or cs
         c = _best_connection(onward)
-        out.extend(piece(v) for v in _via_chain(net, c))
+        vias = [piece(v) for v in _via_chain(net, c)]
+        tls = c.getTLSID()
+        if vias and tls:
+            vias[0].tls = (tls, int(c.getTLLinkIndex()))
+        out.extend(vias)
         lane = c.getToLane()
     return out
 
@@ -211,6 +240,8 @@ def route_geometry(
     wid: list[np.ndarray] = []
     starts: list[float] = []
     kept: list[_Piece] = []
+    stops: list[tuple[float, str, int]] = []
+    geo_len: list[float] = []
     s = 0.0
     last: np.ndarray | None = None
     for pc in _pieces(net, edges, start_lane_index, spacing_m):
@@ -219,12 +250,19 @@ def route_geometry(
             shape = shape[1:]
         if len(shape) == 0:
             continue
+        # The stop line is where the incoming lane ends, before any gap to
+        # the junction lane's first point (about 1 m in the urban grid).
+        end_of_previous = s
         if last is not None:
             s += float(np.hypot(*(shape[0] - last)))
         starts.append(s)
         kept.append(pc)
+        if pc.tls is not None:
+            stops.append((end_of_previous, pc.tls[0], pc.tls[1]))
         d = np.diff(shape, axis=0)
-        s += float(np.hypot(d[:, 0], d[:, 1]).sum())
+        seg = float(np.hypot(d[:, 0], d[:, 1]).sum())
+        geo_len.append(seg)
+        s += seg
         pts.append(shape)
         wid.append(np.full((len(shape), 2), pc.half_width_m))
         last = shape[-1]
@@ -235,5 +273,10 @@ def route_geometry(
         piece_lane=[p.lane for p in kept],
         piece_edge=[p.edge for p in kept],
         piece_index=[p.index for p in kept],
+        piece_speed=np.array([p.speed_mps for p in kept]),
+        piece_scale=np.array([p.length_m / max(g, 1e-9) for p, g in zip(kept, geo_len)]),
+        piece_plain=np.array([p.plain for p in kept], dtype=bool),
+        length_m=s,
+        stops=stops,
         edges=tuple(edges),
     )

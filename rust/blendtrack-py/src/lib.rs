@@ -35,6 +35,7 @@ fn _blendtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(config::load_config, m)?)?;
     m.add_function(wrap_pyfunction!(sim::simulate, m)?)?;
     m.add_function(wrap_pyfunction!(sim::compute_metrics, m)?)?;
+    m.add_function(wrap_pyfunction!(sim::stopping_accel, m)?)?;
     m.add_class::<fleet::Fleet>()?;
     Ok(())
 }

@@ -200,3 +200,13 @@ pub(crate) fn compute_metrics<'py>(
     };
     metrics_dict(py, &run_metrics(&series, wheelbase_m))
 }
+
+/// The reaction-time stopping law (paper eq. 7, the larger root; `b_l` when
+/// no admissible acceleration exists): the acceleration that, held for `tau`
+/// and followed by braking at `b_f`, stops `s0` behind an obstacle `gap_m`
+/// ahead moving at `v_l` and braking at `b_l`. Decelerations are negative.
+#[pyfunction]
+#[pyo3(signature = (v_mps, gap_m, v_l_mps, s0_m, tau_s, b_f_mps2, b_l_mps2))]
+pub(crate) fn stopping_accel(v_mps: f64, gap_m: f64, v_l_mps: f64, s0_m: f64, tau_s: f64, b_f_mps2: f64, b_l_mps2: f64) -> f64 {
+    blendtrack::longitudinal::stopping_accel(v_mps, gap_m, v_l_mps, s0_m, tau_s, b_f_mps2, b_l_mps2)
+}

@@ -18,7 +18,12 @@
 //!   bounded below by `deceleration_factor * preferred_deceleration` so that
 //!   being above the preferred speed (after a lowered speed limit, say) brakes
 //!   comfortably instead of at the IDM's unbounded rate;
-//! - `a_r` is the reaction-time stopping law ([`stopping_accel`]).
+//! - `a_r` is the reaction-time stopping law ([`stopping_accel`]). For the
+//!   virtual obstacle it is bounded below by `max_deceleration` (b_f): the
+//!   border ahead in a curve is a comfort limit, not a wall, so it never
+//!   triggers the emergency braking at b_l that the law falls back to when
+//!   `U < 0`. Followers that expect a leader to brake at most at its normal
+//!   deceleration (SUMO's car-following models) stay collision-free behind it.
 
 use crate::config::ControllerConfig;
 use crate::path::Path;
@@ -108,7 +113,9 @@ pub fn longitudinal_accel(
             cfg.max_obs_deceleration,
         )
     };
-    let virt = d_obs.map(|d| law(d, 0.0)).unwrap_or(f64::INFINITY);
+    // A curve is not an emergency: braking for the virtual obstacle stops at
+    // the planning deceleration b_f; only real obstacles may demand b_l.
+    let virt = d_obs.map(|d| law(d, 0.0).max(cfg.max_deceleration)).unwrap_or(f64::INFINITY);
     let mut a = free.min(virt);
     for o in obstacles {
         if o.gap_m.is_finite() && o.speed_mps.is_finite() {
@@ -596,6 +603,13 @@ mod tests {
         assert_eq!(far.accel_mps2, far.free_flow_mps2);
         let near = longitudinal_accel(3.0, Some(4.0), &[], &cfg);
         assert!(near.accel_mps2 < 0.0 && near.accel_mps2 == near.virtual_obstacle_mps2);
+        // Too fast for a close curve: the law alone would fall back to b_l; the
+        // virtual obstacle asks for b_f at most, a real one at the same gap for b_l.
+        assert_eq!(stopping_accel(25.0, 5.0, 0.0, 0.0, 1.0, -4.0, -8.0), -8.0);
+        let curve = longitudinal_accel(25.0, Some(5.0), &[], &cfg);
+        assert_eq!(curve.accel_mps2, cfg.max_deceleration);
+        let wall = longitudinal_accel(25.0, None, &[Obstacle { gap_m: 5.0, speed_mps: 0.0 }], &cfg);
+        assert_eq!(wall.accel_mps2, cfg.max_obs_deceleration);
         let leader = longitudinal_accel(
             3.0,
             None,
