@@ -236,6 +236,113 @@ def _add_paper_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> Non
     paper.set_defaults(run=_cmd_paper)
 
 
+def _cmd_sumo_run(args: argparse.Namespace) -> int:
+    from blendtrack import sumo
+
+    scenario = sumo.resolve_scenario(args.scenario)
+    config = vehicle = None
+    keys: set[str] = set()
+    if args.config is not None:
+        if not FsPath(args.config).is_file():
+            raise blendtrack.ConfigError(f"cannot read config file {args.config}: no such file")
+        config, vehicle = blendtrack.load_config(args.config)
+        keys = sumo.config_keys(args.config)
+    options = sumo.RunOptions(
+        controlled_fraction=args.controlled_fraction,
+        controlled_type=args.controlled_type,
+        controlled_ids=tuple(x for v in args.controlled_ids or () for x in v.split(",") if x),
+        alpha=args.alpha,
+        config=config,
+        vehicle=vehicle,
+        fixed_path_width="path_width_m" in keys,
+        fixed_preferred_speed="preferred_speed" in keys,
+        end_s=args.end,
+        seed=args.seed,
+        backend="traci" if args.gui else args.backend,
+        gui=args.gui,
+        trace=args.trace,
+        fcd=args.fcd,
+        ssm=args.ssm,
+        progress=not args.quiet,
+    )
+    out = FsPath(args.out)
+    result = sumo.run_scenario(scenario, options, out)
+    s = result.summary
+    rows = [vars_row for vars_row in result.records if vars_row.steps > 0]
+    mean_e = sum(r.sum_abs_e for r in rows) / max(sum(r.steps for r in rows), 1)
+    print(
+        f"{out}: {scenario.name}, {s['end_s']:.0f} s simulated in {s['wall_time_s']:.1f} s; "
+        f"{s['controlled_vehicles']} controlled, {s['background_vehicles']} background vehicles; "
+        f"mean |e| {mean_e:.3f} m; collisions {s['collisions']}, teleports {s['teleports']}, "
+        f"red-light violations {s['red_light_violations']}"
+    )
+    return 0
+
+
+def _cmd_sumo_list(args: argparse.Namespace) -> int:
+    from blendtrack import sumo
+
+    for name in sumo.available_scenarios():
+        sc = sumo.resolve_scenario(name)
+        first = " ".join(str(sc.meta.get("description", "")).split())
+        print(f"{name:<18} {first[:100]}")
+    return 0
+
+
+def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None:
+    sumo_p = subcommands.add_parser(
+        "sumo",
+        help="drive SUMO vehicles with blendtrack (run a scenario, list scenarios)",
+        description="The SUMO plugin: blendtrack controllers drive selected vehicles among SUMO's own drivers.",
+    )
+    sub = sumo_p.add_subparsers(dest="sumo_command", metavar="SUBCOMMAND", required=True)
+    lst = sub.add_parser("list", help="list the scenarios shipped in sumo_scenarios/")
+    lst.set_defaults(run=_cmd_sumo_list)
+    run = sub.add_parser(
+        "run",
+        help="run a scenario with blendtrack driving the selected vehicles",
+        description=(
+            "Runs SCENARIO (a folder of sumo_scenarios/ by name or path, or any .sumocfg) with the selected "
+            "vehicles driven by blendtrack along their lanes and everybody else on SUMO's own models. Writes "
+            "OUT/vehicles.csv (one row per controlled vehicle), OUT/summary.json, the plots "
+            "lateral_error_hist.png, speed_vs_curvature.png and trajectory.png, SUMO's tripinfo (with "
+            "emissions), collision output and log in OUT/sumo/, and on request the per-step trace, FCD and SSM "
+            "outputs. Without --controlled-*, the vehicles of vTypes carrying the parameter "
+            "blendtrack.controlled=true are controlled; vType parameters blendtrack.<key> override any "
+            "[controller] or [vehicle] key for that type."
+        ),
+    )
+    run.add_argument("scenario", metavar="SCENARIO", help="scenario name or folder, or a .sumocfg file")
+    which = run.add_mutually_exclusive_group()
+    which.add_argument(
+        "--controlled-fraction",
+        type=_finite("fraction", 0.0, high=1.0),
+        metavar="P",
+        help="control this fraction of all vehicles, chosen by a seeded hash of their ids (0..1)",
+    )
+    which.add_argument("--controlled-type", metavar="T", help="control every vehicle of vType T")
+    which.add_argument(
+        "--controlled-ids", metavar="IDS", action="append", help="control these vehicle ids (comma-separated, repeatable)"
+    )
+    run.add_argument("--alpha", type=_finite("alpha", 0.0, high=1.0), metavar="A", help="blend factor for every controlled vehicle (0 = rear axle, 1 = front axle)")
+    run.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
+    run.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
+    run.add_argument("--seed", type=int, default=0, metavar="N", help="seed of SUMO and of the vehicle selection (default 0)")
+    run.add_argument("--gui", action="store_true", help="show the run in sumo-gui (through TraCI)")
+    run.add_argument(
+        "--backend",
+        choices=("libsumo", "traci"),
+        default="libsumo",
+        help="libsumo (in-process, fast; default) or traci (sockets, as --gui uses)",
+    )
+    run.add_argument("--trace", action="store_true", help="also write OUT/trace.csv, one row per controlled vehicle and step")
+    run.add_argument("--fcd", action="store_true", help="also write SUMO's floating car data to OUT/sumo/fcd.xml")
+    run.add_argument("--ssm", action="store_true", help="also write SUMO's SSM conflicts (TTC, DRAC, PET) to OUT/sumo/ssm.xml")
+    run.add_argument("--quiet", action="store_true", help="no progress bar")
+    run.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
+    run.set_defaults(run=_cmd_sumo_run)
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog="blendtrack",
@@ -247,6 +354,7 @@ def _build_parser() -> argparse.ArgumentParser:
     version.set_defaults(run=_cmd_version)
     _add_sim_parser(subcommands)
     _add_paper_parser(subcommands)
+    _add_sumo_parser(subcommands)
     return parser
 
 

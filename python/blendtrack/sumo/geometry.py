@@ -10,11 +10,14 @@ hints (SPEC §7: cheap calls when the hints are right).
 
 Lane choice: starting from the vehicle's lane on the first edge, each next
 lane is the one reached by a connection from the current lane to the next
-edge (preferring one that continues to the edge after, then the straightest).
-When the current lane has no connection to the next edge (a lane drop, a
-turn taken from the wrong lane), the track changes lane along that edge: it
-moves smoothly (smoothstep over the edge's length) from the current lane's
-centreline to the nearest lane that continues.
+edge (preferring one from which the rest of the route needs no lane change,
+then one that continues to the edge after, then the straightest). When the
+current lane has no connection to the next edge (a lane drop, a turn taken
+from the wrong lane), the track changes lane along that edge: it moves
+smoothly (smoothstep) from the current lane's centreline to the nearest lane
+that continues, either over the whole edge or, for the SUMO runner, only
+once SUMO's lane-change model says the target lane has room (the track then
+stops at the lane's end until a rebuild with the change in it).
 
 The shapes are resampled every ``spacing_m`` metres (SUMO shapes have long
 straight pieces and short kinks at lane joints); the core's path smooths the
@@ -24,6 +27,7 @@ controllers.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,11 +61,16 @@ class RouteGeometry:
     #: (a normal lane, not a junction lane nor a lane change), so that a
     #: position on it can be given to SUMO as (lane, position).
     piece_plain: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    #: Traffic-light stop lines along the track: (arc length of the stop
-    #: line, traffic light id, link index), sorted by arc length.
-    stops: list[tuple[float, str, int]] = field(default_factory=list)
+    #: Junction entries along the track, sorted by arc length: (arc length of
+    #: the stop line, traffic light id or "" when unsignalised, link index,
+    #: True when the link has priority by the network (state "M"), the first
+    #: junction lane's id, arc length where the junction is left).
+    stops: list[tuple[float, str, int, bool, str, float]] = field(default_factory=list)
     #: Route edges this geometry was built for.
     edges: tuple[str, ...] = field(default_factory=tuple)
+    #: (edge index in ``edges``, target lane index) when the track stops at
+    #: the end of a lane that does not continue and a lane change is due.
+    pending_change: tuple[int, int] | None = None
 
     #: Total arc length (m).
     length_m: float = 0.0
@@ -114,18 +123,23 @@ def _smoothstep(u: np.ndarray) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u)
 
 
-def _lane_change_shape(a: Any, b: Any, spacing_m: float) -> np.ndarray:
-    """Points that move smoothly from lane ``a``'s centreline to lane ``b``'s
-    (two lanes of one edge) over the edge's length."""
+def _lane_change_shape(
+    a: Any, b: Any, spacing_m: float, start_m: float | None = None, length_m: float | None = None
+) -> np.ndarray:
+    """Points that move smoothly (smoothstep) from lane ``a``'s centreline to
+    lane ``b``'s (two lanes of one edge), between ``start_m`` and
+    ``start_m + length_m`` along ``a`` (default: over the whole edge)."""
     sa = _resample(np.asarray(a.getShape(), dtype=float), spacing_m)
     sb = np.asarray(b.getShape(), dtype=float)
     # Sample b at the same relative arc length as each point of a.
     da = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sa, axis=0).T))])
     db = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sb, axis=0).T))])
-    u = da / max(da[-1], 1e-9)
-    tb = u * db[-1]
+    total = max(da[-1], 1e-9)
+    tb = da / total * db[-1]
     pb = np.column_stack([np.interp(tb, db, sb[:, 0]), np.interp(tb, db, sb[:, 1])])
-    w = _smoothstep(u)[:, None]
+    start = 0.0 if start_m is None else min(max(start_m, 0.0), total)
+    length = (total - start) if length_m is None else max(length_m, 1e-6)
+    w = _smoothstep((da - start) / length)[:, None]
     return (1.0 - w) * sa + w * pb
 
 
@@ -139,13 +153,28 @@ class _Piece:
     speed_mps: float
     length_m: float
     plain: bool
-    #: (traffic light id, link index) when this piece starts at a signalised stop line.
-    tls: tuple[str, int] | None = None
+    #: (traffic light id or "", link index, major) when this piece enters a junction.
+    tls: tuple[str, int, bool] | None = None
 
 
-def _pieces(net: Any, edges: Sequence[str], start_index: int, spacing_m: float) -> list[_Piece]:
-    """Lane pieces along the route: normal lanes, lane changes within an
-    edge where the current lane does not continue, and junction lanes."""
+def _pieces(
+    net: Any,
+    edges: Sequence[str],
+    start_index: int,
+    spacing_m: float,
+    defer_changes: bool = False,
+    change: tuple[float, float] | None = None,
+) -> tuple[list[_Piece], tuple[int, int] | None]:
+    """Lane pieces along the route: normal lanes, junction lanes, and lane
+    changes within an edge where the current lane does not continue.
+
+    A needed lane change on the first edge follows ``change`` = (start, length
+    in m along the lane) when given. Otherwise, with ``defer_changes`` the
+    pieces stop at the end of the lane that does not continue and the second
+    value says where the change is due: (edge index, target lane index); the
+    caller rebuilds once the change can be made. Without it the change spans
+    the whole edge.
+    """
     objs = []
     for eid in edges:
         try:
@@ -157,6 +186,14 @@ def _pieces(net: Any, edges: Sequence[str], start_index: int, spacing_m: float) 
         if k >= len(objs):
             return []
         return [c for c in lane.getOutgoing() if c.getTo() is objs[k]]
+
+    # Lanes from which the rest of the route needs no lane change (backwards).
+    no_change: list[set[str]] = [set() for _ in objs]
+    no_change[-1] = {ln.getID() for ln in objs[-1].getLanes()}
+    for k in range(len(objs) - 2, -1, -1):
+        for ln in objs[k].getLanes():
+            if any(c.getToLane().getID() in no_change[k + 1] for c in conns_to(ln, k + 1)):
+                no_change[k].add(ln.getID())
 
     def piece(lane: Any, shape: np.ndarray | None = None) -> _Piece:
         plain = shape is None and not lane.getID().startswith(":")
@@ -187,22 +224,33 @@ def _pieces(net: Any, edges: Sequence[str], start_index: int, spacing_m: float) 
                 raise PathError(
                     f"no lane of edge {edges[k]!r} connects to edge {edges[k + 1]!r}: the route is not drivable"
                 )
-            target = min(able, key=lambda ln: abs(ln.getIndex() - lane.getIndex()))
-            out.append(piece(target, _lane_change_shape(lane, target, spacing_m)))
+            best = [ln for ln in able if ln.getID() in no_change[k]] or able
+            target = min(best, key=lambda ln: abs(ln.getIndex() - lane.getIndex()))
+            if k == 0 and change is not None:
+                out.append(piece(target, _lane_change_shape(lane, target, spacing_m, change[0], change[1])))
+            elif defer_changes:
+                out.append(piece(lane))
+                return out, (k, target.getIndex())
+            else:
+                out.append(piece(target, _lane_change_shape(lane, target, spacing_m)))
             lane = target
             cs = conns_to(lane, k + 1)
         else:
             out.append(piece(lane))
-        # Prefer a connection whose lane goes on to the edge after next.
-        onward = [c for c in cs if conns_to(c.getToLane(), k + 2)] or cs
+        # Prefer a connection needing no later lane change, then one whose lane
+        # goes on to the edge after next.
+        onward = (
+            [c for c in cs if c.getToLane().getID() in no_change[k + 1]]
+            or [c for c in cs if conns_to(c.getToLane(), k + 2)]
+            or cs
+        )
         c = _best_connection(onward)
         vias = [piece(v) for v in _via_chain(net, c)]
-        tls = c.getTLSID()
-        if vias and tls:
-            vias[0].tls = (tls, int(c.getTLLinkIndex()))
+        if vias:
+            vias[0].tls = (c.getTLSID() or "", int(c.getTLLinkIndex()), c.getState() == "M")
         out.extend(vias)
         lane = c.getToLane()
-    return out
+    return out, None
 
 
 def _smooth(points: np.ndarray, sigma_pts: float) -> np.ndarray:
@@ -224,6 +272,8 @@ def route_geometry(
     start_lane_index: int = 0,
     spacing_m: float = 1.0,
     smoothing_m: float = 1.5,
+    defer_changes: bool = False,
+    change: tuple[float, float] | None = None,
 ) -> RouteGeometry:
     """Builds the reference track of a vehicle on ``edges`` starting in lane ``start_lane_index``.
 
@@ -232,6 +282,9 @@ def route_geometry(
     deviation) to round the kinks where SUMO's lane shapes meet (up to 28 deg
     at the junctions of the urban grid); on a curve of radius R this moves
     the path inward by about ``smoothing_m**2 / (2 R)`` (4 cm at R = 30 m).
+    ``defer_changes`` and ``change`` control lane changes (see ``_pieces``):
+    with ``defer_changes`` the track may stop at the end of a lane that does
+    not continue, and ``pending_change`` says where and to which lane.
     Raises :class:`blendtrack.PathError` for an empty or undrivable route.
     """
     if len(edges) == 0:
@@ -240,11 +293,12 @@ def route_geometry(
     wid: list[np.ndarray] = []
     starts: list[float] = []
     kept: list[_Piece] = []
-    stops: list[tuple[float, str, int]] = []
+    stops: list[tuple[float, str, int, bool, str, float]] = []
     geo_len: list[float] = []
     s = 0.0
     last: np.ndarray | None = None
-    for pc in _pieces(net, edges, start_lane_index, spacing_m):
+    pieces, pending = _pieces(net, edges, start_lane_index, spacing_m, defer_changes, change)
+    for pc in pieces:
         shape = pc.shape
         if last is not None and np.hypot(*(shape[0] - last)) < 1e-6:
             shape = shape[1:]
@@ -258,7 +312,9 @@ def route_geometry(
         starts.append(s)
         kept.append(pc)
         if pc.tls is not None:
-            stops.append((end_of_previous, pc.tls[0], pc.tls[1]))
+            stops.append((end_of_previous, pc.tls[0], pc.tls[1], pc.tls[2], pc.lane, math.inf))
+        if stops and math.isinf(stops[-1][5]) and not pc.lane.startswith(":"):
+            stops[-1] = (*stops[-1][:5], s)
         d = np.diff(shape, axis=0)
         seg = float(np.hypot(d[:, 0], d[:, 1]).sum())
         geo_len.append(seg)
@@ -277,6 +333,7 @@ def route_geometry(
         piece_scale=np.array([p.length_m / max(g, 1e-9) for p, g in zip(kept, geo_len)]),
         piece_plain=np.array([p.plain for p in kept], dtype=bool),
         length_m=s,
+        pending_change=pending,
         stops=stops,
         edges=tuple(edges),
     )

@@ -58,6 +58,10 @@ LEADER_RANGE_M = 250.0
 # (lane, position) at the lane centre instead of as (x, y, angle).
 CHEAP_LATERAL_M = 0.15
 CHEAP_HEADING_RAD = math.radians(2.0)
+# Room kept before the end of a lane that does not continue, to change lanes (m).
+LANE_CHANGE_ROOM_M = 15.0
+# How far before a junction without priority a vehicle asks SUMO whether foes approach (m).
+YIELD_LOOKAHEAD_M = 30.0
 
 
 def _sumo_home() -> str:
@@ -142,6 +146,7 @@ class VehicleRecord:
     speed_warnings: int = 0
     reverse_warnings: int = 0
     time_above_comfort_s: float = 0.0
+    lane_changes: int = 0
 
 
 @dataclass
@@ -159,6 +164,8 @@ class _Active:
     record: VehicleRecord
     config: ControllerConfig
     next_stop: int = 0
+    #: (stop index, stop?) decided when the light ahead turned yellow.
+    yellow_decision: tuple[int, bool] | None = None
     trajectory: list[tuple[float, float, float, float, float, float]] | None = None
 
 
@@ -205,6 +212,8 @@ class SumoRun:
         self.counts = {"collisions": 0, "teleports": 0, "red_light_violations": 0, "vanished": 0, "takeover_failures": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         self.cheap_moves = 0
+        #: (time, vehicle, traffic light, link index, front before, front after, stop line) of each red-light crossing.
+        self.violations: list[tuple[Any, ...]] = []
         self.xy_moves = 0
         self.sumo: Any = None
         self._tc: Any = None
@@ -348,15 +357,20 @@ class SumoRun:
             self._net = sumolib.net.readNet(str(self.scenario.net_file), withInternal=True)
         return self._net
 
-    def _geometry(self, edges: tuple[str, ...], lane_index: int) -> tuple[RouteGeometry, int, blendtrack.Path]:
+    def _geometry(
+        self, edges: tuple[str, ...], lane_index: int, change: tuple[float, float] | None = None
+    ) -> tuple[RouteGeometry, int, blendtrack.Path]:
+        """The track of a route from a lane; shared by every vehicle on the same
+        route and lane (a track with a lane change in it belongs to one vehicle)."""
         key = (edges, lane_index)
-        hit = self._geo_cache.get(key)
+        hit = self._geo_cache.get(key) if change is None else None
         if hit is None:
-            geo = route_geometry(self._net_geometry(), edges, lane_index)
+            geo = route_geometry(self._net_geometry(), edges, lane_index, defer_changes=True, change=change)
             path = blendtrack.Path(geo.points, geo.widths, closed=False)
             track = self.fleet.add_track(path, self.base_config)
             hit = (geo, track, path)
-            self._geo_cache[key] = hit
+            if change is None:
+                self._geo_cache[key] = hit
         return hit
 
     def _take_over(self, vid: str, t: float) -> None:
@@ -556,7 +570,6 @@ class SumoRun:
             self._refresh_tls()
         acts = [self.active[v] for v in ids]
         st = np.array([self._state[v] for v in ids])
-        slots = np.fromiter((a.slot for a in acts), dtype=np.int64, count=n)
         leader_gap = np.full(n, np.nan)
         leader_speed = np.full(n, np.nan)
         stop_gap = np.full(n, np.nan)
@@ -574,6 +587,8 @@ class SumoRun:
                 leader_gap[i] = gap - margin
                 other = self._state.get(lid)
                 leader_speed[i] = other[3] if other is not None else sumo.vehicle.getSpeed(lid)
+            if act.geo.pending_change is not None:
+                self._try_lane_change(act, subs[vid], speeds[i])
             geo = act.geo
             sf = self._s_front.get(vid, math.nan)
             s_front[i] = sf
@@ -583,20 +598,58 @@ class SumoRun:
             while act.next_stop < len(geo.stops) and sf == sf and geo.stops[act.next_stop][0] < sf - 0.5:
                 act.next_stop += 1
             if act.next_stop < len(geo.stops) and sf == sf:
-                s_stop, tls, link = geo.stops[act.next_stop]
-                state = self._tls_char(tls, link)
+                s_stop, tls, link, major, via, s_exit = geo.stops[act.next_stop]
                 gap = s_stop - sf - margin
+                state = self._tls_char(tls, link) if tls else ("G" if major else "m")
+                if state not in "yY":
+                    act.yellow_decision = None
                 if state in "rRu":
                     stop_gap[i] = gap
-                elif state in "yY" and self._can_stop(act, abs(speeds[i]), gap):
+                elif state in "yY":
                     # Yellow: stop when the stopping law manages it at the
-                    # planning deceleration, otherwise clear the junction.
+                    # planning deceleration, otherwise clear the junction. The
+                    # decision holds until the light changes: re-deciding every
+                    # step flips to "go" as the stop nears (the law brakes
+                    # harder than b_f at the end) and then fails to stop at red.
+                    if act.yellow_decision is None or act.yellow_decision[0] != act.next_stop:
+                        act.yellow_decision = (act.next_stop, self._can_stop(act, abs(speeds[i]), gap))
+                    if act.yellow_decision[1]:
+                        stop_gap[i] = gap
+                elif (
+                    gap < YIELD_LOOKAHEAD_M
+                    and leader_gap[i] == leader_gap[i]
+                    # Where the leader's back would stop if it braked now at 4 m/s^2.
+                    and sf + leader_gap[i] + margin + leader_speed[i] ** 2 / 8.0 - s_exit
+                    < act.length_m + act.min_gap_m + margin
+                    and self._can_stop(act, abs(speeds[i]), gap)
+                ):
+                    # Keep the junction clear: no room for this vehicle behind
+                    # its leader on the far side, so wait at the line.
+                    stop_gap[i] = gap
+                elif (
+                    state != "G"
+                    and gap < YIELD_LOOKAHEAD_M
+                    and self._can_stop(act, abs(speeds[i]), gap)
+                    and self._must_yield(vid, via)
+                ):
+                    # A link without priority (green without priority, an
+                    # unsignalised minor road): wait at the line while SUMO
+                    # reports foes approaching it, unless it is too late to
+                    # stop before the line (then stopping would block the
+                    # junction: clear it instead).
                     stop_gap[i] = gap
             # End of the route: a standing obstacle a little past the last lane's end,
-            # so the vehicle slows down and SUMO sees it arrive.
-            end_gap = geo.length_m + 5.0 - sf if sf == sf else math.nan
+            # so the vehicle slows down and SUMO sees it arrive. A track that stops
+            # where a lane change is due ends LANE_CHANGE_ROOM_M early instead:
+            # the vehicle waits there for a gap, with room left to change.
+            if geo.pending_change is not None:
+                end_gap = geo.length_m - LANE_CHANGE_ROOM_M - sf - margin if sf == sf else math.nan
+            else:
+                end_gap = geo.length_m + 5.0 - sf if sf == sf else math.nan
             if end_gap == end_gap and end_gap < 200.0:
                 stop_gap[i] = end_gap if not stop_gap[i] == stop_gap[i] else min(stop_gap[i], end_gap)
+        # After the loop: a lane change above may have moved a vehicle to a new slot.
+        slots = np.fromiter((a.slot for a in acts), dtype=np.int64, count=n)
         out = self.fleet.step(
             slots,
             st[:, 0],
@@ -666,9 +719,10 @@ class SumoRun:
             # Red-light crossing: the front passed a stop line whose light is red.
             old_sf = s_front[i]
             if act.next_stop < len(act.geo.stops) and old_sf == old_sf:
-                s_stop, tls, link = act.geo.stops[act.next_stop]
-                if old_sf < s_stop <= sf_new + (v * dt) and self._tls_char(tls, link) in "rR" and sf_new >= s_stop:
+                s_stop, tls, link = act.geo.stops[act.next_stop][:3]
+                if tls and old_sf < s_stop <= sf_new and self._tls_char(tls, link) in "rR":
                     rec.red_light_violations += 1
+                    self.violations.append((t, vid, tls, link, old_sf, sf_new, s_stop))
                     self.counts["red_light_violations"] += 1
             self._s_front[vid] = sf_new
             prev_v = self._state[vid][3]
@@ -708,6 +762,47 @@ class SumoRun:
         c = act.config
         a = blendtrack.stopping_accel(v, gap, 0.0, c.preferred_stop_dist, c.reaction_time, c.max_deceleration, c.max_obs_deceleration)
         return a >= c.max_deceleration
+
+    def _try_lane_change(self, act: _Active, sub: dict[int, Any], speed: float) -> None:
+        """A lane change is due on this edge: make it once SUMO's lane-change
+        model says the target lane has room (``couldChangeLane``)."""
+        tc = self._tc
+        geo = act.geo
+        k_edge, target = geo.pending_change  # type: ignore[misc]
+        edge = geo.edges[k_edge]
+        lane_id = sub.get(tc.VAR_LANE_ID, "")
+        if not lane_id or lane_id.rsplit("_", 1)[0] != edge:
+            return
+        current = int(lane_id.rsplit("_", 1)[1])
+        if current == target:
+            return
+        direction = 1 if target > current else -1
+        if not self.sumo.vehicle.couldChangeLane(act.vid, direction):
+            return
+        pos = float(sub.get(tc.VAR_LANEPOSITION, 0.0))
+        lane_length = float(self._net_geometry().getLane(lane_id).getLength())
+        length = min(max(2.0 * abs(speed), 10.0), 30.0, lane_length - pos - 1.0)
+        if length < 8.0:
+            return
+        geo2, track, path = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
+        cfg = self.fleet.vehicle_config(act.slot)
+        veh = self.fleet.vehicle_params(act.slot)
+        self.fleet.remove_vehicle(act.slot)
+        act.slot = self.fleet.add_vehicle(track, cfg, veh)
+        act.geo = geo2
+        act.next_stop = 0
+        act.record.lane_changes += 1
+        x, y, th = self._state[act.vid][:3]
+        reach = act.wheelbase_m + act.front_overhang_m
+        self._s_front[act.vid] = float(path.project(x + reach * math.cos(th), y + reach * math.sin(th))["s_m"])
+
+    def _must_yield(self, vid: str, via: str) -> bool:
+        """SUMO's view of the link ahead: does it lack priority with foes approaching?"""
+        for link in self.sumo.vehicle.getNextLinks(vid):
+            # (lane, has priority, is open, has foe, via lane, state, direction, length)
+            if link[4] == via:
+                return (not link[1]) and bool(link[3])
+        return False
 
     def _tls_char(self, tls: str, link: int) -> str:
         st = self._tls_state.get(tls, "")

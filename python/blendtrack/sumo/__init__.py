@@ -1,0 +1,55 @@
+"""The SUMO plugin: blendtrack controllers drive selected vehicles of a SUMO simulation.
+
+- :func:`resolve_scenario` finds and checks a scenario (a folder of
+  ``sumo_scenarios/``, any folder with a ``scenario.toml`` or one
+  ``.sumocfg``, or a ``.sumocfg`` file).
+- :class:`SumoRun` runs it with the selected vehicles under blendtrack
+  control (libsumo in-process, or TraCI for sumo-gui).
+- :func:`run_scenario` does both and writes the outputs
+  (``vehicles.csv``, ``summary.json``, plots, SUMO's own outputs in ``sumo/``).
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from blendtrack.sumo.runner import RunOptions, RunResult, SumoRun
+from blendtrack.sumo.scenario import Scenario, ScenarioError, available_scenarios, resolve_scenario
+
+__all__ = [
+    "RunOptions",
+    "RunResult",
+    "Scenario",
+    "ScenarioError",
+    "SumoRun",
+    "available_scenarios",
+    "config_keys",
+    "resolve_scenario",
+    "run_scenario",
+]
+
+
+def config_keys(file: str | Path) -> set[str]:
+    """Keys set in the ``[controller]`` table of a config file (to tell a
+    user's explicit ``path_width_m`` or ``preferred_speed`` from the defaults)."""
+    data: dict[str, Any] = tomllib.loads(Path(file).read_text())
+    table = data.get("controller", {})
+    return set(table) if isinstance(table, dict) else set()
+
+
+def run_scenario(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
+    """Runs ``scenario`` and writes ``out/vehicles.csv``, ``out/summary.json``,
+    the plots, the optional trace, and SUMO's outputs under ``out/sumo/``."""
+    from blendtrack.sumo import report
+
+    out.mkdir(parents=True, exist_ok=True)
+    run = SumoRun(scenario, options, out)
+    result = run.run()
+    report.write_vehicles_csv(result.records, out / "vehicles.csv")
+    if options.trace:
+        run.write_trace(out / "trace.csv")
+    report.plot_run(result, out, scenario.comfort_lateral_accel_mps2)
+    report.write_json(result.summary, out / "summary.json")
+    return result

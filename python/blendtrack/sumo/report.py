@@ -1,0 +1,194 @@
+"""Outputs of a SUMO run: ``vehicles.csv``, ``summary.json``, the trace and plots.
+
+Files are written to a temporary name and renamed into place, so an
+interrupted run never leaves a file that looks complete.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import os
+import xml.etree.ElementTree as ET
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from blendtrack.sumo.runner import RunResult, VehicleRecord
+
+#: The columns of vehicles.csv, in order (more may follow).
+VEHICLE_COLUMNS = (
+    "id",
+    "lateral_error_mean_abs_m",
+    "lateral_error_rms_m",
+    "lateral_error_max_abs_m",
+    "heading_error_rms_deg",
+    "mean_speed_mps",
+    "lateral_accel_max_mps2",
+    "long_jerk_rms_mps3",
+    "travel_time_s",
+    "collisions",
+    "teleports",
+)
+EXTRA_COLUMNS = (
+    "vtype",
+    "depart_s",
+    "end_s",
+    "end_reason",
+    "distance_m",
+    "steps",
+    "red_light_violations",
+    "speed_warnings",
+    "reverse_warnings",
+    "time_above_comfort_s",
+    "lane_changes",
+)
+
+
+def vehicle_row(r: VehicleRecord) -> dict[str, Any]:
+    n = max(r.steps, 1)
+    nan = math.nan
+    return {
+        "id": r.vid,
+        "lateral_error_mean_abs_m": r.sum_abs_e / n if r.steps else nan,
+        "lateral_error_rms_m": math.sqrt(r.sum_e2 / n) if r.steps else nan,
+        "lateral_error_max_abs_m": r.max_abs_e if r.steps else nan,
+        "heading_error_rms_deg": math.degrees(math.sqrt(r.sum_eth2 / n)) if r.steps else nan,
+        "mean_speed_mps": r.sum_v / n if r.steps else nan,
+        "lateral_accel_max_mps2": r.max_lat_acc if r.steps else nan,
+        "long_jerk_rms_mps3": math.sqrt(r.sum_jerk2 / r.jerk_n) if r.jerk_n else nan,
+        "travel_time_s": r.end_s - r.depart_s,
+        "collisions": r.collisions,
+        "teleports": r.teleports,
+        "vtype": r.vtype,
+        "depart_s": r.depart_s,
+        "end_s": r.end_s,
+        "end_reason": r.reason,
+        "distance_m": r.distance_m,
+        "steps": r.steps,
+        "red_light_violations": r.red_light_violations,
+        "speed_warnings": r.speed_warnings,
+        "reverse_warnings": r.reverse_warnings,
+        "time_above_comfort_s": r.time_above_comfort_s,
+        "lane_changes": r.lane_changes,
+    }
+
+
+def _atomic_write(path: Path, write: Any) -> None:
+    tmp = path.with_name(path.name + ".part")
+    with open(tmp, "w", newline="") as f:
+        write(f)
+    os.replace(tmp, path)
+
+
+def write_vehicles_csv(records: Iterable[VehicleRecord], path: Path) -> None:
+    rows = [vehicle_row(r) for r in records]
+
+    def write(f: Any) -> None:
+        w = csv.DictWriter(f, fieldnames=[*VEHICLE_COLUMNS, *EXTRA_COLUMNS])
+        w.writeheader()
+        for row in rows:
+            w.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()})
+
+    _atomic_write(path, write)
+
+
+def write_json(data: dict[str, Any], path: Path) -> None:
+    clean = {k: (None if isinstance(v, float) and not math.isfinite(v) else v) for k, v in data.items()}
+
+    def write(f: Any) -> None:
+        json.dump(clean, f, indent=2, allow_nan=False)
+        f.write("\n")
+
+    _atomic_write(path, write)
+
+
+def fcd_lateral_accel(
+    fcd_file: Path, dt_s: float, window_s: float = 1.0, skip_internal: bool = True
+) -> dict[str, tuple[float, str]]:
+    """Largest lateral acceleration of every vehicle in an FCD file.
+
+    ``a_lat = v * dpsi/dt`` with the heading change taken over ``window_s``
+    (it smooths the heading steps where lane shapes meet). Returns
+    ``{vehicle id: (max |a_lat| in m/s^2, lane where it happened)}``; samples
+    on junction lanes are skipped by default (SUMO limits turn speeds there).
+    """
+    k = max(1, round(window_s / dt_s))
+    hist: dict[str, list[tuple[float, float, str]]] = {}
+    best: dict[str, tuple[float, str]] = {}
+    for _, el in ET.iterparse(fcd_file, events=("end",)):
+        if el.tag != "vehicle":
+            if el.tag == "timestep":
+                el.clear()
+            continue
+        vid = el.get("id", "")
+        angle = float(el.get("angle", "nan"))
+        speed = float(el.get("speed", "nan"))
+        lane = el.get("lane", "")
+        h = hist.setdefault(vid, [])
+        h.append((angle, speed, lane))
+        if len(h) > k:
+            a0, _, lane0 = h.pop(0)
+            if skip_internal and (lane.startswith(":") or lane0.startswith(":")):
+                continue
+            dpsi = (angle - a0 + 180.0) % 360.0 - 180.0
+            a_lat = abs(speed * math.radians(dpsi) / (k * dt_s))
+            if a_lat > best.get(vid, (-1.0, ""))[0]:
+                best[vid] = (a_lat, lane)
+    return best
+
+
+def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
+    """Lateral-error distribution, speed against curvature, one trajectory."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    files: list[Path] = []
+    samples = result.samples
+    fig, ax = plt.subplots(figsize=(7, 4))
+    if len(samples):
+        ax.hist(samples[:, 2], bins=50, color="tab:blue")
+    ax.set_xlabel("|lateral error| of the control point (m)")
+    ax.set_ylabel("samples (every 10th step)")
+    ax.set_title("Lateral error of controlled vehicles")
+    fig.tight_layout()
+    files.append(out / "lateral_error_hist.png")
+    fig.savefig(files[-1], dpi=110)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    if len(samples):
+        ax.scatter(samples[:, 0], samples[:, 1], s=3, alpha=0.4, label="controlled vehicles")
+        kmax = max(float(samples[:, 0].max()), 1e-3)
+        k = np.linspace(kmax / 200, kmax, 200)
+        ax.plot(k, np.sqrt(comfort / k), "k--", lw=1, label=f"v = sqrt({comfort:g} / |curvature|)")
+        ax.set_ylim(0, max(float(samples[:, 1].max()) * 1.1, 1.0))
+    ax.set_xlabel("|path curvature| (1/m)")
+    ax.set_ylabel("speed (m/s)")
+    ax.set_title("Speed against curvature")
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    files.append(out / "speed_vs_curvature.png")
+    fig.savefig(files[-1], dpi=110)
+    plt.close(fig)
+
+    if result.trajectories:
+        vid, (traj, ref) = next(iter(result.trajectories.items()))
+        fig, ax = plt.subplots(figsize=(7, 6))
+        ax.plot(ref[:, 0], ref[:, 1], color="0.6", lw=3, label="lane centreline (reference)")
+        ax.plot(traj[:, 1], traj[:, 2], color="tab:red", lw=1, label=f"{vid} (front bumper)")
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title(f"Trajectory of {vid} against its lane")
+        ax.legend(loc="best", fontsize=8)
+        fig.tight_layout()
+        files.append(out / "trajectory.png")
+        fig.savefig(files[-1], dpi=110)
+        plt.close(fig)
+    return files
