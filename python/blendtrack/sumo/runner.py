@@ -217,6 +217,7 @@ class SumoRun:
         self.xy_moves = 0
         self.sumo: Any = None
         self._tc: Any = None
+        self._use_subscriptions = False
 
     # ------------------------------------------------------------------ SUMO
     def _command(self) -> list[str]:
@@ -249,6 +250,7 @@ class SumoRun:
 
             self.sumo = traci
             self._tc = tc
+            self._use_subscriptions = True
             label = f"blendtrack-{os.getpid()}-{id(self)}"
             try:
                 traci.start(self._command(), label=label)
@@ -259,8 +261,15 @@ class SumoRun:
             import libsumo
             import traci.constants as tc  # the same constants libsumo uses
 
+            # libsumo runs SUMO inside this process, and SUMO 1.28 crashes it
+            # (segmentation fault) on some malformed networks: load the
+            # configuration once in a child process first, so a bad scenario
+            # is a clear error and not a dead interpreter.
+            self._check_loads()
+
             self.sumo = libsumo
             self._tc = tc
+            self._use_subscriptions = False
             try:
                 libsumo.start(self._command())
             except Exception as e:
@@ -286,6 +295,21 @@ class SumoRun:
         for tls in lights:
             self.sumo.trafficlight.subscribe(tls, [tc.TL_RED_YELLOW_GREEN_STATE])
         self._has_tls = bool(lights)
+
+    def _check_loads(self) -> None:
+        import subprocess
+
+        cmd = [sumo_binary(False), "-c", str(self.scenario.sumocfg), "--end", "0", "--no-step-log", "true",
+               "--duration-log.disable", "true", "--no-warnings", "true"]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        except (OSError, subprocess.TimeoutExpired) as e:
+            raise ScenarioError(f"{self.scenario.sumocfg}: cannot run SUMO to check the scenario: {e}") from None
+        if proc.returncode != 0:
+            lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
+            crash = f"SUMO crashed while loading it (signal {-proc.returncode})" if proc.returncode < 0 else f"exit code {proc.returncode}"
+            errors = [ln for ln in lines if "Error" in ln] or lines or [crash]
+            raise ScenarioError(f"{self.scenario.sumocfg}: SUMO refused to start: {errors[0].strip()}")
 
     def close(self) -> None:
         if self.sumo is not None:
@@ -416,9 +440,10 @@ class SumoRun:
         self._state[vid] = state
         v.setSpeedMode(vid, 0)
         v.setLaneChangeMode(vid, 0)
-        tc = self._tc
-        v.subscribe(vid, [tc.VAR_ROUTE_ID, tc.VAR_LANE_ID, tc.VAR_LANEPOSITION])
-        v.subscribeLeader(vid, LEADER_RANGE_M)
+        if self._use_subscriptions:
+            tc = self._tc
+            v.subscribe(vid, [tc.VAR_ROUTE_ID, tc.VAR_LANE_ID, tc.VAR_LANEPOSITION])
+            v.subscribeLeader(vid, LEADER_RANGE_M)
 
     def _drop(self, vid: str, t: float, reason: str) -> None:
         act = self.active.pop(vid, None)
@@ -546,10 +571,39 @@ class SumoRun:
             bar.close()
         return steps
 
+    def _read_controlled(self) -> dict[str, dict[int, Any]]:
+        """Lane, lane position, route id and leader of every controlled vehicle
+        still in the simulation, keyed like subscription results.
+
+        Over TraCI these come from vehicle subscriptions (one socket round trip
+        for all). With libsumo 1.28 a vehicle subscription breaks every later
+        ``simulationStep`` ("Vehicle 'x' is not known") once another client
+        removes the subscribed vehicle, so there the same values come from
+        in-process getters (about a microsecond each, no cheaper through a
+        subscription) and the simulation survives such removals.
+        """
+        sumo = self.sumo
+        tc = self._tc
+        if self._use_subscriptions:
+            return sumo.vehicle.getAllSubscriptionResults()  # type: ignore[no-any-return]
+        v = sumo.vehicle
+        present = set(v.getIDList())
+        out: dict[str, dict[int, Any]] = {}
+        for vid in self.active:
+            if vid not in present:
+                continue
+            out[vid] = {
+                tc.VAR_ROUTE_ID: v.getRouteID(vid),
+                tc.VAR_LANE_ID: v.getLaneID(vid),
+                tc.VAR_LANEPOSITION: v.getLanePosition(vid),
+                tc.VAR_LEADER: v.getLeader(vid, LEADER_RANGE_M),
+            }
+        return out
+
     def _control_step(self, t: float, comfort: float) -> None:
         sumo = self.sumo
         tc = self._tc
-        subs = sumo.vehicle.getAllSubscriptionResults()
+        subs = self._read_controlled()
         ids = []
         for vid in list(self.active):
             r = subs.get(vid)
@@ -579,7 +633,7 @@ class SumoRun:
         margin = self.opt.standstill_margin_m
         for i, (vid, act) in enumerate(zip(ids, acts)):
             lead = subs[vid].get(tc.VAR_LEADER)
-            if lead and lead[0]:
+            if lead and lead[0] and lead[1] >= -100.0:
                 lid, gap = lead
                 # SUMO's gap already leaves out the vType's minGap, and SUMO
                 # counts anything closer than minGap as a collision: plan to
@@ -692,10 +746,15 @@ class SumoRun:
                 # lane's centreline (SPEC §7): moveTo places it BEFORE SUMO's own
                 # movement, so aim v dt short and let setSpeed(v) cover the rest.
                 pos = (sf_new - geo.piece_start_s[k]) * geo.piece_scale[k] - v * dt
+                if k == len(geo.piece_lane) - 1 and geo.pending_change is None and sf_new > geo.length_m - 2.0 * v * dt - 2.0:
+                    # About to arrive: a deferred (x, y) move would be applied
+                    # after SUMO removed the vehicle. Let SUMO carry it to the end.
+                    set_speed(vid, v)
+                    self.cheap_moves += 1
                 # Only when the whole vehicle is on that lane: SUMO keeps a
                 # vehicle's back on the lanes behind it (its "further lanes")
                 # through (x, y) moves, and a lane-position move would drop them.
-                if geo.piece_plain[k] and pos >= act.length_m and abs(e[i]) < CHEAP_LATERAL_M and abs(eth[i]) < CHEAP_HEADING_RAD and v >= 0.0:
+                elif geo.piece_plain[k] and pos >= act.length_m and abs(e[i]) < CHEAP_LATERAL_M and abs(eth[i]) < CHEAP_HEADING_RAD and v >= 0.0:
                     # Our arc length and SUMO's lane position can differ by a
                     # few cm (smoothed geometry, earlier (x, y) moves): never
                     # move a vehicle backwards into its follower's minGap.

@@ -1,0 +1,191 @@
+"""The SUMO plugin on real SUMO (libsumo and TraCI, never a mock)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import pytest
+
+from blendtrack import sumo
+from blendtrack.sumo.report import VEHICLE_COLUMNS, fcd_lateral_accel
+from blendtrack.sumo.runner import RunOptions, SumoRun
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIOS = REPO / "sumo_scenarios"
+
+
+def _read_vehicles(out: Path) -> list[dict[str, str]]:
+    with open(out / "vehicles.csv") as f:
+        return list(csv.DictReader(f))
+
+
+def _collisions(out: Path) -> list[dict[str, str]]:
+    root = ET.parse(out / "sumo" / "collisions.xml").getroot()
+    return [c.attrib for c in root.iter("collision")]
+
+
+@pytest.fixture(scope="module")
+def rural(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, sumo.RunResult]:
+    out = tmp_path_factory.mktemp("rural")
+    sc = sumo.resolve_scenario("rural_loop")
+    result = sumo.run_scenario(sc, RunOptions(end_s=300, fcd=True, progress=False), out)
+    return out, result
+
+
+def test_rural_loop_tracks_lanes_within_comfort(rural: tuple[Path, sumo.RunResult]) -> None:
+    out, result = rural
+    rows = _read_vehicles(out)
+    assert list(rows[0])[: len(VEHICLE_COLUMNS)] == list(VEHICLE_COLUMNS)
+    assert len(rows) >= 5, "the rural loop departs an automated vehicle every 30 s"
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("controlled_vehicles", "background_vehicles", "collisions", "teleports", "red_light_violations", "wall_time_s", "steps_per_second"):
+        assert key in summary
+    assert summary["controlled_vehicles"] == len(rows)
+    assert summary["collisions"] == 0 and summary["teleports"] == 0
+    assert _collisions(out) == []
+    # Steps-weighted mean |lateral error| over all controlled vehicles.
+    steps = sum(int(r["steps"]) for r in rows)
+    mean_e = sum(float(r["lateral_error_mean_abs_m"]) * int(r["steps"]) for r in rows) / steps
+    assert mean_e < 0.10, mean_e
+    comfort = summary["comfort_lateral_accel_mps2"]
+    worst_controlled = max(float(r["lateral_accel_max_mps2"]) for r in rows)
+    assert worst_controlled < comfort, worst_controlled
+    # SUMO's own drivers on the same road exceed the comfort bound in the curves.
+    lat = fcd_lateral_accel(out / "sumo" / "fcd.xml", summary["step_length_s"])
+    humans = {vid: a for vid, (a, lane) in lat.items() if vid.startswith("human")}
+    assert humans, "background vehicles are in the FCD output"
+    above = [a for a in humans.values() if a > comfort]
+    assert len(above) >= len(humans) // 2, f"{len(above)} of {len(humans)} humans exceed {comfort} m/s^2"
+    # Our own controlled vehicles, measured the same way from SUMO's FCD, stay below it too.
+    autos = [a for vid, (a, _) in lat.items() if vid.startswith("auto")]
+    assert max(autos) < comfort + 0.3, max(autos)
+
+
+def test_rural_loop_outputs_and_plots(rural: tuple[Path, sumo.RunResult]) -> None:
+    out, _ = rural
+    for name in ("lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png"):
+        assert (out / name).stat().st_size > 5_000, name
+    trip = ET.parse(out / "sumo" / "tripinfo.xml").getroot()
+    assert trip.find("tripinfo") is not None or len(list(trip)) >= 0
+    assert (out / "sumo" / "fcd.xml").stat().st_size > 0
+
+
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, sumo.RunResult]:
+    out = tmp_path_factory.mktemp("grid")
+    sc = sumo.resolve_scenario("urban_grid")
+    result = sumo.run_scenario(sc, RunOptions(end_s=300, trace=True, progress=False), out)
+    return out, result
+
+
+def test_grid_stops_for_red_lights_and_follows_leaders(grid: tuple[Path, sumo.RunResult]) -> None:
+    out, result = grid
+    rows = _read_vehicles(out)
+    assert len(rows) >= 30
+    assert result.summary["red_light_violations"] == 0
+    assert all(int(r["red_light_violations"]) == 0 for r in rows)
+    # Controlled vehicles really met red lights: some of them stood still.
+    with open(out / "trace.csv") as f:
+        trace = list(csv.DictReader(f))
+    stopped = {r["id"] for r in trace if float(r["v_mps"]) < 0.1}
+    assert len(stopped) >= 10, len(stopped)
+    # No controlled vehicle ran into the vehicle ahead of it on its lane.
+    controlled = {r["id"] for r in rows}
+    rear_ends = [c for c in _collisions(out) if c["type"] == "collision" and c["collider"] in controlled]
+    assert rear_ends == [], rear_ends
+
+
+def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -> None:
+    sc = sumo.resolve_scenario("urban_grid")
+    run = SumoRun(sc, RunOptions(end_s=150, progress=False), tmp_path)
+    removed: list[str] = []
+
+    def remove_one(r: SumoRun, t: float) -> None:
+        if not removed and t >= 40.0 and r.active:
+            vid = sorted(r.active)[0]
+            r.sumo.vehicle.remove(vid)
+            removed.append(vid)
+
+    run.step_hooks.append(remove_one)
+    result = run.run()
+    records = {r.vid: r for r in result.records}
+    assert removed and records[removed[0]].reason in ("vanished", "arrived")
+    arrived = [r for r in result.records if r.reason == "arrived"]
+    assert arrived, "vehicles finish their routes within 150 s"
+    assert not run.active and len(run.fleet) == 0, "no stale controller state"
+    assert all(r.end_s >= r.depart_s for r in result.records)
+
+
+def test_traci_backend_matches_libsumo(tmp_path: Path) -> None:
+    """The --gui code path (TraCI over a socket), exercised with the plain sumo binary."""
+    sc = sumo.resolve_scenario("rural_loop")
+    a = sumo.run_scenario(sc, RunOptions(end_s=60, progress=False), tmp_path / "lib")
+    b = sumo.run_scenario(sc, RunOptions(end_s=60, progress=False, backend="traci"), tmp_path / "traci")
+    assert b.summary["backend"] == "traci"
+    ra = {r.vid: r for r in a.records}
+    rb = {r.vid: r for r in b.records}
+    assert ra.keys() == rb.keys() and ra
+    for vid in ra:
+        assert rb[vid].steps == ra[vid].steps
+        assert abs(rb[vid].sum_abs_e - ra[vid].sum_abs_e) < 1e-6 * max(1.0, ra[vid].sum_abs_e)
+
+
+def test_user_sumocfg_without_scenario_toml(tmp_path: Path) -> None:
+    mine = tmp_path / "mine"
+    shutil.copytree(SCENARIOS / "ring_single_lane", mine)
+    (mine / "scenario.toml").unlink()
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "blendtrack.cli", "sumo", "run", str(mine / "ring_single_lane.sumocfg"),
+           "--controlled-fraction", "0.3", "--end", "60", "--quiet", "--out", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    rows = _read_vehicles(out)
+    assert 1 <= len(rows) < 22, "about 30 % of the 22 ring vehicles"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["controlled_vehicles"] + summary["background_vehicles"] == 22
+
+
+def _cli(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run([sys.executable, "-m", "blendtrack.cli", *args], capture_output=True, text=True, timeout=300)
+
+
+@pytest.mark.parametrize(
+    "make_args, expect",
+    [
+        (lambda tmp: ["sumo", "run", "no_such_scenario", "--out", str(tmp / "o")], "not found"),
+        (lambda tmp: ["sumo", "run", str(tmp), "--out", str(tmp / "o")], "no .sumocfg"),
+        (lambda tmp: ["sumo", "run", "rural_loop", "--controlled-type", "robot", "--out", str(tmp / "o")], "robot"),
+        (lambda tmp: ["sumo", "run", "rural_loop", "--controlled-fraction", "1.5", "--out", str(tmp / "o")], "fraction"),
+        (lambda tmp: ["sumo", "run", "rural_loop", "--alpha", "-0.2", "--out", str(tmp / "o")], "alpha"),
+    ],
+)
+def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, make_args, expect: str) -> None:  # type: ignore[no-untyped-def]
+    proc = _cli(*make_args(tmp_path))
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and expect in lines[0], proc.stderr
+    assert "Traceback" not in proc.stderr
+
+
+def test_net_sumo_rejects_is_one_line_and_exit_2(tmp_path: Path) -> None:
+    bad = tmp_path / "bad"
+    shutil.copytree(SCENARIOS / "ring_single_lane", bad)
+    (bad / "ring_single_lane.net.xml").write_text("<net><edge id='x'><lane id='x_0' length='abc'/></edge></net>\n")
+    proc = _cli("sumo", "run", str(bad), "--end", "10", "--quiet", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "SUMO refused" in lines[0], proc.stderr
+
+
+def test_malformed_scenario_toml_is_reported(tmp_path: Path) -> None:
+    bad = tmp_path / "bad"
+    shutil.copytree(SCENARIOS / "ring_single_lane", bad)
+    (bad / "scenario.toml").write_text("name = [unclosed\n")
+    with pytest.raises(sumo.ScenarioError, match="malformed TOML"):
+        sumo.resolve_scenario(bad)
