@@ -207,6 +207,14 @@ pub(crate) fn compute_metrics<'py>(
 /// ahead moving at `v_l` and braking at `b_l`. Decelerations are negative.
 #[pyfunction]
 #[pyo3(signature = (v_mps, gap_m, v_l_mps, s0_m, tau_s, b_f_mps2, b_l_mps2))]
-pub(crate) fn stopping_accel(v_mps: f64, gap_m: f64, v_l_mps: f64, s0_m: f64, tau_s: f64, b_f_mps2: f64, b_l_mps2: f64) -> f64 {
+pub(crate) fn stopping_accel(
+    v_mps: f64,
+    gap_m: f64,
+    v_l_mps: f64,
+    s0_m: f64,
+    tau_s: f64,
+    b_f_mps2: f64,
+    b_l_mps2: f64,
+) -> f64 {
     blendtrack::longitudinal::stopping_accel(v_mps, gap_m, v_l_mps, s0_m, tau_s, b_f_mps2, b_l_mps2)
 }

@@ -517,7 +517,11 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
         n_obs += 1;
     }
     let limit = opt(inp.speed_limit_mps);
-    let limit = if limit.is_finite() && limit > 0.0 { Some(limit) } else { None };
+    let limit = if limit.is_finite() && limit > 0.0 {
+        Some(limit)
+    } else {
+        None
+    };
     let Ok(o) = e
         .controller
         .step_limited(&state, alpha, &obstacles[..n_obs], limit)
@@ -862,27 +866,52 @@ mod tests {
     #[test]
     fn speed_limit_caps_the_free_flow_target() {
         let mut fleet = Fleet::new();
-        let cfg = ControllerConfig { preferred_speed: 10.0, ..Default::default() };
-        let t = fleet.add_track(Path::straight(5000.0, 5.0).unwrap(), cfg.clone()).unwrap();
+        let cfg = ControllerConfig {
+            preferred_speed: 10.0,
+            ..Default::default()
+        };
+        let t = fleet
+            .add_track(Path::straight(5000.0, 5.0).unwrap(), cfg.clone())
+            .unwrap();
         let a = fleet.add_vehicle(t as i64, None, None).unwrap() as i64;
         let b = fleet.add_vehicle(t as i64, None, None).unwrap() as i64;
         let mut st = [(0.0, 0.0, 0.0, 0.0, 0.0); 2];
         st[1].1 = 3.0;
         for _ in 0..1500 {
             let slots = [a, b];
-            let cols: Vec<Vec<f64>> = (0..5).map(|k| st.iter().map(|s| [s.0, s.1, s.2, s.3, s.4][k]).collect()).collect();
+            let cols: Vec<Vec<f64>> = (0..5)
+                .map(|k| st.iter().map(|s| [s.0, s.1, s.2, s.3, s.4][k]).collect())
+                .collect();
             let limit = [f64::NAN, 5.0];
-            let mut inp = FleetInputs::new(&slots, &cols[0], &cols[1], &cols[2], &cols[3], &cols[4]);
+            let mut inp =
+                FleetInputs::new(&slots, &cols[0], &cols[1], &cols[2], &cols[3], &cols[4]);
             inp.speed_limit_mps = Some(&limit);
             inp.dt_s = Some(0.1);
             let out = fleet.step(&inp).unwrap();
             let n = out.next.unwrap();
             for i in 0..2 {
-                st[i] = (n.x_m[i], n.y_m[i], n.theta_rad[i], n.v_mps[i], n.delta_rad[i]);
+                st[i] = (
+                    n.x_m[i],
+                    n.y_m[i],
+                    n.theta_rad[i],
+                    n.v_mps[i],
+                    n.delta_rad[i],
+                );
             }
-            assert!(out.s_rear_m[0] <= out.s_m[0] + 1e-9, "the control point is ahead of the rear axle");
+            assert!(
+                out.s_rear_m[0] <= out.s_m[0] + 1e-9,
+                "the control point is ahead of the rear axle"
+            );
         }
-        assert!((st[0].3 - 10.0).abs() < 0.2, "no limit: preferred speed, got {}", st[0].3);
-        assert!((st[1].3 - 5.0).abs() < 0.1, "limited to 5 m/s, got {}", st[1].3);
+        assert!(
+            (st[0].3 - 10.0).abs() < 0.2,
+            "no limit: preferred speed, got {}",
+            st[0].3
+        );
+        assert!(
+            (st[1].3 - 5.0).abs() < 0.1,
+            "limited to 5 m/s, got {}",
+            st[1].3
+        );
     }
 }

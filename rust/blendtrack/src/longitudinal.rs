@@ -115,7 +115,9 @@ pub fn longitudinal_accel(
     };
     // A curve is not an emergency: braking for the virtual obstacle stops at
     // the planning deceleration b_f; only real obstacles may demand b_l.
-    let virt = d_obs.map(|d| law(d, 0.0).max(cfg.max_deceleration)).unwrap_or(f64::INFINITY);
+    let virt = d_obs
+        .map(|d| law(d, 0.0).max(cfg.max_deceleration))
+        .unwrap_or(f64::INFINITY);
     let mut a = free.min(virt);
     for o in obstacles {
         if o.gap_m.is_finite() && o.speed_mps.is_finite() {
@@ -608,7 +610,15 @@ mod tests {
         assert_eq!(stopping_accel(25.0, 5.0, 0.0, 0.0, 1.0, -4.0, -8.0), -8.0);
         let curve = longitudinal_accel(25.0, Some(5.0), &[], &cfg);
         assert_eq!(curve.accel_mps2, cfg.max_deceleration);
-        let wall = longitudinal_accel(25.0, None, &[Obstacle { gap_m: 5.0, speed_mps: 0.0 }], &cfg);
+        let wall = longitudinal_accel(
+            25.0,
+            None,
+            &[Obstacle {
+                gap_m: 5.0,
+                speed_mps: 0.0,
+            }],
+            &cfg,
+        );
         assert_eq!(wall.accel_mps2, cfg.max_obs_deceleration);
         let leader = longitudinal_accel(
             3.0,

@@ -752,126 +752,108 @@ impl Path {
         self.make_projection_flat(p, k, t, d2)
     }
 
+    /// The segment after / before `k`, wrapping on closed paths.
+    #[inline]
+    fn next_seg(&self, k: usize) -> Option<usize> {
+        let n = self.seg_len.len();
+        if self.closed {
+            Some((k + 1) % n)
+        } else if k + 1 < n {
+            Some(k + 1)
+        } else {
+            None
+        }
+    }
+    #[inline]
+    fn prev_seg(&self, k: usize) -> Option<usize> {
+        let n = self.seg_len.len();
+        if self.closed {
+            Some((k + n - 1) % n)
+        } else {
+            k.checked_sub(1)
+        }
+    }
+
+    /// Arc length from `from` forward to `to` (wrapping on closed paths).
+    #[inline]
+    fn forward_distance(&self, from: f64, to: f64) -> f64 {
+        let d = self.arc_delta(from, to);
+        if self.closed && d < 0.0 {
+            d + self.length
+        } else {
+            d
+        }
+    }
+
     /// (squared distance, segment, offset) of the hinted nearest point.
     fn nearest_hinted(&self, p: &Point2<f64>, hint_s: f64) -> (f64, usize, f64) {
         if !hint_s.is_finite() {
             return self.nearest_full(p);
         }
         let n_seg = self.seg_len.len();
-        let (k0, _) = self.locate(hint_s.clamp(
-            if self.closed { f64::NEG_INFINITY } else { 0.0 },
-            if self.closed {
-                f64::INFINITY
-            } else {
-                self.length
-            },
-        ));
+        let bound = if self.closed {
+            hint_s
+        } else {
+            hint_s.clamp(0.0, self.length)
+        };
+        let (k0, _) = self.locate(bound);
         let hint = self.wrap_s(hint_s);
         let mut best = {
             let (d2, t) = self.seg_dist2(k0, p);
             (d2, k0, t)
         };
         let mut scanned = 1usize;
-        // Forward.
-        let mut last_fwd = k0;
-        let mut k = k0;
-        loop {
-            if scanned >= n_seg {
-                break;
-            }
-            let next = if self.closed {
-                (k + 1) % n_seg
-            } else if k + 1 < n_seg {
-                k + 1
-            } else {
-                break;
-            };
-            let ahead = self.arc_delta(hint, self.s[next]);
-            let ahead = if self.closed && ahead < 0.0 {
-                ahead + self.length
-            } else {
-                ahead
-            };
-            if ahead > self.window_ahead_m {
-                break;
-            }
-            k = next;
-            scanned += 1;
-            last_fwd = k;
+        let mut consider = |k: usize, best: &mut (f64, usize, f64)| -> bool {
             let (d2, t) = self.seg_dist2(k, p);
-            if d2 < best.0 {
-                best = (d2, k, t);
+            let better = d2 < best.0;
+            if better {
+                *best = (d2, k, t);
+            }
+            better
+        };
+        // The window: segments starting within window_ahead_m ahead of the
+        // hint, and ending within window_back_m behind it.
+        let mut last_fwd = k0;
+        while scanned < n_seg {
+            match self.next_seg(last_fwd) {
+                Some(nx) if self.forward_distance(hint, self.s[nx]) <= self.window_ahead_m => {
+                    last_fwd = nx;
+                    scanned += 1;
+                    consider(nx, &mut best);
+                }
+                _ => break,
             }
         }
-        // Backward.
         let mut last_bwd = k0;
-        k = k0;
-        loop {
-            if scanned >= n_seg {
-                break;
-            }
-            let prev = if self.closed {
-                (k + n_seg - 1) % n_seg
-            } else if k > 0 {
-                k - 1
-            } else {
-                break;
-            };
-            let behind = self.arc_delta(self.s[prev] + self.seg_len[prev], hint);
-            let behind = if self.closed && behind < 0.0 {
-                behind + self.length
-            } else {
-                behind
-            };
-            if behind > self.window_back_m {
-                break;
-            }
-            k = prev;
-            scanned += 1;
-            last_bwd = k;
-            let (d2, t) = self.seg_dist2(k, p);
-            if d2 < best.0 {
-                best = (d2, k, t);
+        while scanned < n_seg {
+            match self.prev_seg(last_bwd) {
+                Some(pv)
+                    if self.forward_distance(self.s[pv] + self.seg_len[pv], hint)
+                        <= self.window_back_m =>
+                {
+                    last_bwd = pv;
+                    scanned += 1;
+                    consider(pv, &mut best);
+                }
+                _ => break,
             }
         }
         // Walk on past the window edge while the distance keeps decreasing.
-        if best.1 == last_fwd {
-            let mut k = last_fwd;
-            while scanned < n_seg {
-                let next = if self.closed {
-                    (k + 1) % n_seg
-                } else if k + 1 < n_seg {
-                    k + 1
-                } else {
-                    break;
-                };
-                let (d2, t) = self.seg_dist2(next, p);
-                scanned += 1;
-                if d2 < best.0 {
-                    best = (d2, next, t);
-                    k = next;
-                } else {
-                    break;
-                }
-            }
+        let step: Option<(usize, fn(&Self, usize) -> Option<usize>)> = if best.1 == last_fwd {
+            Some((last_fwd, Self::next_seg))
         } else if best.1 == last_bwd {
-            let mut k = last_bwd;
+            Some((last_bwd, Self::prev_seg))
+        } else {
+            None
+        };
+        if let Some((mut k, advance)) = step {
             while scanned < n_seg {
-                let prev = if self.closed {
-                    (k + n_seg - 1) % n_seg
-                } else if k > 0 {
-                    k - 1
-                } else {
-                    break;
-                };
-                let (d2, t) = self.seg_dist2(prev, p);
+                let Some(nk) = advance(self, k) else { break };
                 scanned += 1;
-                if d2 < best.0 {
-                    best = (d2, prev, t);
-                    k = prev;
-                } else {
+                if !consider(nk, &mut best) {
                     break;
                 }
+                k = nk;
             }
         }
         best
