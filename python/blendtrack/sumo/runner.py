@@ -76,10 +76,24 @@ def _sumo_home() -> str:
 
 
 def sumo_binary(gui: bool = False) -> str:
-    """Path of the ``sumo`` (or ``sumo-gui``) binary of the installed SUMO."""
+    """Path of the ``sumo`` (or ``sumo-gui``) binary of the installed SUMO:
+    the eclipse-sumo wheel's, else ``$SUMO_HOME/bin``, else the one on PATH."""
+    import shutil
+
     name = "sumo-gui" if gui else "sumo"
-    path = Path(_sumo_home()) / "bin" / name
-    return str(path) if path.exists() else name
+    homes = []
+    try:
+        import sumo  # the eclipse-sumo wheel
+
+        homes.append(str(sumo.SUMO_HOME))
+    except ImportError:
+        pass
+    homes.append(_sumo_home())
+    for home in homes:
+        path = Path(home) / "bin" / name
+        if path.exists():
+            return str(path)
+    return shutil.which(name) or name
 
 
 @dataclass
@@ -92,6 +106,8 @@ class RunOptions:
     controlled_type: str | None = None
     #: Explicit vehicle ids to control.
     controlled_ids: tuple[str, ...] = ()
+    #: Control at most this many vehicles (the first selected ones to depart).
+    max_controlled: int | None = None
     #: Blend factor override for every controlled vehicle.
     alpha: float | None = None
     config: ControllerConfig | None = None
@@ -365,6 +381,8 @@ class SumoRun:
 
     def is_selected(self, vid: str, vtype: str) -> bool:
         o = self.opt
+        if o.max_controlled is not None and len(self.records) >= o.max_controlled:
+            return False
         if o.controlled_ids:
             return vid in o.controlled_ids
         if o.controlled_fraction is not None:
