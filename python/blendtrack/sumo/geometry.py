@@ -27,6 +27,7 @@ controllers.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -72,13 +73,24 @@ class RouteGeometry:
     #: the end of a lane that does not continue and a lane change is due.
     pending_change: tuple[int, int] | None = None
 
+    def __post_init__(self) -> None:
+        # Plain-list copies for the per-vehicle, per-step look-ups of the
+        # SUMO runner (bisect on a list beats a numpy call on small arrays).
+        self.starts: list[float] = [float(x) for x in self.piece_start_s]
+        self.speeds: list[float] = [float(x) for x in self.piece_speed]
+        self.scales: list[float] = [float(x) for x in self.piece_scale]
+        self.plains: list[bool] = [bool(x) for x in self.piece_plain]
+
+    def piece_index_at(self, s: float) -> int:
+        """Index of the piece holding arc length ``s`` (clamped to the pieces)."""
+        return min(max(bisect.bisect_right(self.starts, s) - 1, 0), len(self.starts) - 1)
+
     #: Total arc length (m).
     length_m: float = 0.0
 
     def lane_at(self, s: float) -> tuple[str, int, str]:
         """(edge id, lane index, lane id) of the piece holding arc length ``s``."""
-        i = int(np.searchsorted(self.piece_start_s, s, side="right")) - 1
-        i = min(max(i, 0), len(self.piece_lane) - 1)
+        i = self.piece_index_at(s)
         return self.piece_edge[i], self.piece_index[i], self.piece_lane[i]
 
     def piece_of(self, s: np.ndarray) -> np.ndarray:

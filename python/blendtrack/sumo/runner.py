@@ -664,8 +664,7 @@ class SumoRun:
             geo = act.geo
             sf = self._s_front.get(vid, math.nan)
             s_front[i] = sf
-            k = int(np.searchsorted(geo.piece_start_s, sf, side="right")) - 1 if sf == sf else 0
-            limit[i] = geo.piece_speed[min(max(k, 0), len(geo.piece_speed) - 1)]
+            limit[i] = geo.speeds[geo.piece_index_at(sf) if sf == sf else 0]
             # The next signalised stop line ahead of the front bumper.
             while act.next_stop < len(geo.stops) and sf == sf and geo.stops[act.next_stop][0] < sf - 0.5:
                 act.next_stop += 1
@@ -735,12 +734,17 @@ class SumoRun:
             speed_limit=limit,
             dt=self.dt,
         )
-        ok = out["ok"]
-        nx, ny, nth, nv, nd = out["x_m"], out["y_m"], out["theta_rad"], out["v_mps"], out["delta_rad"]
-        e = out["lateral_error_m"]
-        eth = out["heading_error_rad"]
-        s_rear = out["s_rear_m"]
-        kappa = out["curvature_per_m"]
+        # Python lists: indexing them is several times cheaper than numpy scalars.
+        ok = out["ok"].tolist()
+        nx, ny, nth, nv, nd = (out[k].tolist() for k in ("x_m", "y_m", "theta_rad", "v_mps", "delta_rad"))
+        e = out["lateral_error_m"].tolist()
+        eth = out["heading_error_rad"].tolist()
+        s_rear = out["s_rear_m"].tolist()
+        kappa = out["curvature_per_m"].tolist()
+        v_obs = out["virtual_obstacle_m"].tolist()
+        limits = limit.tolist()
+        s_fronts = s_front.tolist()
+        trace = self.opt.trace
         move = sumo.vehicle.moveToXY
         move_to = sumo.vehicle.moveTo
         set_speed = sumo.vehicle.setSpeed
@@ -751,19 +755,18 @@ class SumoRun:
                 # Unusable state (NaN): hand the vehicle back rather than move it anywhere.
                 self._drop(vid, t, "invalid_state")
                 continue
-            x, y, th, v, d = float(nx[i]), float(ny[i]), float(nth[i]), float(nv[i]), float(nd[i])
+            x, y, th, v, d = nx[i], ny[i], nth[i], nv[i], nd[i]
             reach = act.wheelbase_m + act.front_overhang_m
-            c, s = math.cos(th), math.sin(th)
-            xf, yf = x + reach * c, y + reach * s
-            sf_new = float(s_rear[i]) + reach
+            xf, yf = x + reach * math.cos(th), y + reach * math.sin(th)
+            sf_new = s_rear[i] + reach
             geo = act.geo
-            k = min(max(int(np.searchsorted(geo.piece_start_s, sf_new, side="right")) - 1, 0), len(geo.piece_lane) - 1)
+            k = geo.piece_index_at(sf_new)
             edge, lane_index, lane_id = geo.piece_edge[k], geo.piece_index[k], geo.piece_lane[k]
             try:
                 # The cheap call carries the same pose when the vehicle is on its
                 # lane's centreline (SPEC §7): moveTo places it BEFORE SUMO's own
                 # movement, so aim v dt short and let setSpeed(v) cover the rest.
-                pos = (sf_new - geo.piece_start_s[k]) * geo.piece_scale[k] - v * dt
+                pos = (sf_new - geo.starts[k]) * geo.scales[k] - v * dt
                 if k == len(geo.piece_lane) - 1 and geo.pending_change is None and sf_new > geo.length_m - 2.0 * v * dt - 2.0:
                     # About to arrive: a deferred (x, y) move would be applied
                     # after SUMO removed the vehicle. Let SUMO carry it to the end.
@@ -772,7 +775,7 @@ class SumoRun:
                 # Only when the whole vehicle is on that lane: SUMO keeps a
                 # vehicle's back on the lanes behind it (its "further lanes")
                 # through (x, y) moves, and a lane-position move would drop them.
-                elif geo.piece_plain[k] and pos >= act.length_m and abs(e[i]) < CHEAP_LATERAL_M and abs(eth[i]) < CHEAP_HEADING_RAD and v >= 0.0:
+                elif geo.plains[k] and pos >= act.length_m and abs(e[i]) < CHEAP_LATERAL_M and abs(eth[i]) < CHEAP_HEADING_RAD and v >= 0.0:
                     # Our arc length and SUMO's lane position can differ by a
                     # few cm (smoothed geometry, earlier (x, y) moves): never
                     # move a vehicle backwards into its follower's minGap.
@@ -794,7 +797,7 @@ class SumoRun:
                 self._drop(vid, t, "vanished")
                 continue
             # Red-light crossing: the front passed a stop line whose light is red.
-            old_sf = s_front[i]
+            old_sf = s_fronts[i]
             if act.next_stop < len(act.geo.stops) and old_sf == old_sf:
                 s_stop, tls, link = act.geo.stops[act.next_stop][:3]
                 if tls and old_sf < s_stop <= sf_new and self._tls_char(tls, link) in "rR":
@@ -806,12 +809,13 @@ class SumoRun:
             self._state[vid] = (x, y, th, v, d)
             acc = (v - prev_v) / dt
             lat_acc = v * v * math.tan(d) / act.wheelbase_m
-            ae = abs(float(e[i]))
+            ae = abs(e[i])
             rec.steps += 1
             rec.sum_abs_e += ae
             rec.sum_e2 += ae * ae
-            rec.max_abs_e = max(rec.max_abs_e, ae)
-            rec.sum_eth2 += float(eth[i]) ** 2
+            if ae > rec.max_abs_e:
+                rec.max_abs_e = ae
+            rec.sum_eth2 += eth[i] * eth[i]
             rec.sum_v += abs(v)
             rec.distance_m += abs(v) * dt
             if abs(lat_acc) > rec.max_lat_acc:
@@ -823,17 +827,16 @@ class SumoRun:
                 rec.sum_jerk2 += jerk * jerk
                 rec.jerk_n += 1
             rec.last_acc = acc
-            lim = limit[i]
-            if abs(v) > lim * 1.0001:
+            if abs(v) > limits[i] * 1.0001:
                 rec.speed_warnings += 1
             if v < 0.0:
                 rec.reverse_warnings += 1
             if rec.steps % 10 == 0:
-                self._samples.append((abs(float(kappa[i])), abs(v), ae, abs(lat_acc)))
+                self._samples.append((abs(kappa[i]), abs(v), ae, abs(lat_acc)))
             if act.trajectory is not None:
-                act.trajectory.append((t, xf, yf, v, float(e[i]), float(kappa[i])))
-            if self.opt.trace:
-                self._trace_rows.append((t, vid, x, y, th, v, d, float(e[i]), float(eth[i]), float(s_rear[i]), float(kappa[i]), acc, float(out["virtual_obstacle_m"][i]), edge, lane_index))
+                act.trajectory.append((t, xf, yf, v, e[i], kappa[i]))
+            if trace:
+                self._trace_rows.append((t, vid, x, y, th, v, d, e[i], eth[i], s_rear[i], kappa[i], acc, v_obs[i], edge, lane_index))
 
     def _can_stop(self, act: _Active, v: float, gap: float) -> bool:
         c = act.config
