@@ -462,7 +462,8 @@ def plain_text(table: list[dict[str, Any]], results: list[SeedResult], model: st
         if not (r["difference"] == r["difference"]):
             return None
         word = "lower" if r["difference"] < 0 else "higher" if r["difference"] > 0 else "unchanged"
-        s = f"{what} was {fmt(r['treatment'])} {r['unit']} against {fmt(r['baseline'])} {r['unit']} ({word}; difference {fmt(r['difference'])}"
+        unit = "" if r["unit"] in ("count", "veh") else " " + r["unit"]
+        s = f"{what} was {fmt(r['treatment'])}{unit} against {fmt(r['baseline'])}{unit} ({word}; difference {fmt(r['difference'])}"
         if r["ci_low"] == r["ci_low"]:
             zero = r["ci_low"] <= 0.0 <= r["ci_high"]
             s += f", 95% CI [{fmt(r['ci_low'])}, {fmt(r['ci_high'])}]" + (", which includes zero: not distinguishable from no change with these seeds" if zero else ", which excludes zero")
@@ -506,13 +507,12 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
         for which, run in (("baseline", r.base), ("treatment", r.treat)):
             for vid in ids:
                 tr = run.fcd[vid]
-                _, a, kap = lateral_series(tr, dt)
-                k = max(1, round(LAT_WINDOW_S / dt))
-                t_all, _, _ = lateral_series(tr, dt)
+                t_all, a, kap = lateral_series(tr, dt)
                 idx = np.searchsorted(tr.t, t_all)
                 v = tr.speed[np.clip(idx, 0, len(tr.speed) - 1)]
                 ok = kap == kap
-                samples[which].append(np.column_stack([kap[ok], v[ok]])[::k // 2 or 1])
+                # Every 0.5 s: enough points, a readable scatter.
+                samples[which].append(np.column_stack([kap[ok], v[ok]])[:: max(1, round(0.5 / dt))])
                 lat[which].append(np.abs(a))
     colors = {"baseline": "tab:orange", "treatment": "tab:blue"}
 
@@ -525,8 +525,9 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
             kmax = max(kmax, float(np.nanpercentile(s[:, 0], 99.5)))
     k = np.linspace(kmax / 200, kmax, 200)
     ax.plot(k, np.sqrt(comfort / k), "k--", lw=1, label=f"v = sqrt({comfort:g} / curvature)")
+    vmax = max([float(np.nanmax(np.vstack(samples[w])[:, 1])) for w in samples if samples[w] and len(np.vstack(samples[w]))] + [1.0])
     ax.set_xlim(0, kmax * 1.05)
-    ax.set_ylim(bottom=0)
+    ax.set_ylim(0, vmax * 1.15)
     ax.set_xlabel("curvature of the driven path, |dpsi| / ds over 1 s (1/m, from FCD)")
     ax.set_ylabel("speed (m/s)")
     ax.set_title("Speed against curvature, controlled vehicles and their baseline twins")
@@ -580,22 +581,27 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
         fig.savefig(files[-1][1], dpi=100)
         plt.close(fig)
 
+    # The tightest curve any controlled vehicle drove (largest driven-path
+    # curvature in the treatment), and the same vehicle there in the baseline.
     best = None
     for row in r0.rows:
-        a = row["lat_accel_max_mps2_baseline"]
-        if a == a and (best is None or a > best[0]):
-            best = (a, row["id"])
+        tr = r0.treat.fcd[row["id"]]
+        t_k, _, kap = lateral_series(tr, dt)
+        if len(kap) and np.isfinite(kap).any():
+            j = int(np.nanargmax(kap))
+            if best is None or kap[j] > best[0]:
+                best = (float(kap[j]), row["id"], float(t_k[j]))
     if best is not None:
-        vid = best[1]
-        tb = r0.base.fcd[vid]
-        t_b, a_b, _ = lateral_series(tb, dt)
-        t_peak = float(t_b[int(np.argmax(np.abs(a_b)))])
-        i = int(np.searchsorted(tb.t, t_peak))
-        cx, cy = tb.x[min(i, len(tb.x) - 1)], tb.y[min(i, len(tb.y) - 1)]
+        _, vid, t_peak = best
+        tt = r0.treat.fcd[vid]
+        i = min(int(np.searchsorted(tt.t, t_peak)), len(tt.t) - 1)
+        # The middle of the 1 s window that had the largest curvature.
+        i = max(i - max(1, round(LAT_WINDOW_S / dt)) // 2, 0)
+        cx, cy = tt.x[i], tt.y[i]
         fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
         for which, run in (("baseline", r0.base), ("treatment", r0.treat)):
             tr = run.fcd[vid]
-            near = np.hypot(tr.x - cx, tr.y - cy) < 80.0
+            near = np.hypot(tr.x - cx, tr.y - cy) < 60.0
             # Only the first pass through the curve.
             if near.any():
                 start = int(np.argmax(near))
@@ -606,11 +612,11 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
-        ax.set_title(f"{vid} through its tightest curve (seed {r0.seed})")
+        ax.set_title(f"{vid} through its tightest curve (seed {r0.seed}, 60 m around it)")
         ax.legend(fontsize=8)
         ax2.set_xlabel("time since entering the window (s)")
         ax2.set_ylabel("speed (m/s)")
-        ax2.set_title("speed in the same 80 m window")
+        ax2.set_title("speed in the same window (first pass)")
         ax2.legend(fontsize=8)
         fig.tight_layout()
         files.append((f"Trajectory of {vid} in a tight curve", out / "curve_trajectory.png"))
@@ -676,7 +682,8 @@ def write_outputs(results: list[SeedResult], out: Path, scenario: Scenario, opts
         "SUMO's drivers are placed on the lane centreline, so the baseline's is 0 by construction, not measured.",
         "- Curvature in the speed plot is the curvature of the driven path (|dpsi| / ds over 1 s, from FCD), "
         "the same estimate for both runs, not the lane's geometry.",
-        "- SSM conflicts: conflicts in ssm.xml with minimum TTC < 3 s or maximum DRAC > 3 m/s^2. "
+        "- SSM conflicts: conflicts in ssm.xml with minimum TTC < 3 s or maximum DRAC > 3 m/s^2 "
+        "(SUMO 1.28 writes no ssm.xml at all when a run has no conflict: counted as 0). "
         "Collisions and teleports: SUMO's statistic output (all vehicles).",
         "- Per-vehicle pairs: comparison.csv; per-run network numbers: network.csv; the runs: runs/seed*/.",
         "",
