@@ -271,7 +271,8 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     out = FsPath(args.out)
-    result = sumo.run_scenario(scenario, options, out)
+    # Absolute: SUMO resolves relative output paths against the .sumocfg's folder.
+    result = sumo.run_scenario(scenario, options, out.resolve())
     s = result.summary
     rows = [vars_row for vars_row in result.records if vars_row.steps > 0]
     mean_e = sum(r.sum_abs_e for r in rows) / max(sum(r.steps for r in rows), 1)

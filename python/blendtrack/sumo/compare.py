@@ -279,10 +279,11 @@ def read_tripinfo(file: Path) -> dict[str, dict[str, float]]:
     return out
 
 
-def read_ssm_conflicts(file: Path) -> int:
+def read_ssm_conflicts(file: Path) -> float:
+    """Conflicts with TTC < 3 s or DRAC > 3 m/s^2 (NaN without an ssm.xml)."""
     n = 0
     if not file.exists():
-        return 0
+        return math.nan
     for _, el in ET.iterparse(file, events=("end",)):
         if el.tag != "conflict":
             continue
@@ -464,7 +465,9 @@ def plain_text(table: list[dict[str, Any]], results: list[SeedResult], model: st
         word = "lower" if r["difference"] < 0 else "higher" if r["difference"] > 0 else "unchanged"
         unit = "" if r["unit"] in ("count", "veh") else " " + r["unit"]
         s = f"{what} was {fmt(r['treatment'])}{unit} against {fmt(r['baseline'])}{unit} ({word}; difference {fmt(r['difference'])}"
-        if r["ci_low"] == r["ci_low"]:
+        if r["ci_low"] == r["ci_high"] == r["difference"] == 0.0:
+            s += ", the same in every seed"
+        elif r["ci_low"] == r["ci_low"]:
             zero = r["ci_low"] <= 0.0 <= r["ci_high"]
             s += f", 95% CI [{fmt(r['ci_low'])}, {fmt(r['ci_high'])}]" + (", which includes zero: not distinguishable from no change with these seeds" if zero else ", which excludes zero")
         else:
@@ -683,7 +686,7 @@ def write_outputs(results: list[SeedResult], out: Path, scenario: Scenario, opts
         "- Curvature in the speed plot is the curvature of the driven path (|dpsi| / ds over 1 s, from FCD), "
         "the same estimate for both runs, not the lane's geometry.",
         "- SSM conflicts: conflicts in ssm.xml with minimum TTC < 3 s or maximum DRAC > 3 m/s^2 "
-        "(SUMO 1.28 writes no ssm.xml at all when a run has no conflict: counted as 0). "
+        "(every conflict SUMO's SSM device listed in the run's ssm.xml). "
         "Collisions and teleports: SUMO's statistic output (all vehicles).",
         "- Per-vehicle pairs: comparison.csv; per-run network numbers: network.csv; the runs: runs/seed*/.",
         "",
@@ -727,6 +730,8 @@ def compare(scenario: Scenario, opts: CompareOptions, out: Path) -> list[dict[st
         if opts.controlled_type not in known:
             raise ScenarioError(f"--controlled-type {opts.controlled_type!r}: no such vType in {scenario.sumocfg.name} "
                                 f"(known: {', '.join(sorted(known))})")
+    # SUMO resolves relative output paths against the .sumocfg's folder.
+    out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
     # A report left from an earlier compare would look like this one's if we are interrupted.
     for name in ("report.md", "report.html", "comparison.csv", "network.csv"):
