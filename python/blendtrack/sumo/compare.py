@@ -139,9 +139,7 @@ def with_model(scenario: Scenario, model: str, tmp: Path) -> Scenario:
     for i, rf in enumerate(scenario.route_files):
         tree = ET.parse(rf)
         for vt in tree.getroot().iter("vType"):
-            vt.set("carFollowModel", cf)
-            # Krauss' own parameters mean nothing to the other models (SUMO warns).
-            vt.attrib.pop("sigmaStep", None) if cf != "EIDM" else None
+            vt.set("carFollowModel", cf)  # every other attribute kept
         dst = tmp / f"{i}_{rf.name}"
         tree.write(dst, encoding="UTF-8", xml_declaration=True)
         new_routes.append(dst.resolve())
@@ -546,7 +544,8 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
     bins = np.linspace(0, top, 60)
     for which, v in zip(("baseline", "treatment"), allv):
         if len(v):
-            ax.hist(v, bins=bins, alpha=0.5, color=colors[which], label=which, density=True)
+            ax.hist(v, bins=bins, density=True, color=colors[which], label=which,
+                    **({"alpha": 0.5} if which == "baseline" else {"histtype": "step", "lw": 1.5}))
     ax.axvline(comfort, color="k", ls="--", lw=1, label=f"comfort {comfort:g} m/s^2")
     ax.set_yscale("log")
     ax.set_xlabel("|lateral acceleration| (m/s^2, v dpsi/dt over 1 s, from FCD)")
