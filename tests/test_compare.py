@@ -107,6 +107,20 @@ def test_report_numbers_equal_the_csv(study: Path) -> None:
         assert lo == pytest.approx(m - half, rel=1e-3, abs=1e-9) and hi == pytest.approx(m + half, rel=1e-3, abs=1e-9)
 
 
+def test_report_network_numbers_equal_network_csv(study: Path) -> None:
+    with open(study / "network.csv") as f:
+        runs = list(csv.DictReader(f))
+    table = _table(study)
+    for name, label, _ in compare.NETWORK_METRICS:
+        base = [float(r[name]) for r in runs if r["run"] == "baseline"]
+        treat = [float(r[name]) for r in runs if r["run"] == "treatment"]
+        assert len(base) == len(treat) == SEEDS
+        cells = table[label]
+        expected = [np.mean(base), np.mean(treat), np.mean(np.subtract(treat, base))]
+        for got, want in zip(cells[1:4], expected):
+            assert float(got) == pytest.approx(float(want), rel=1e-3, abs=1e-9), (name, cells)
+
+
 def test_blendtrack_lowers_max_lateral_acceleration_on_the_rural_loop(study: Path) -> None:
     rows = _rows(study)
     pairs = [(float(r["lat_accel_max_mps2_baseline"]), float(r["lat_accel_max_mps2_treatment"])) for r in rows]
