@@ -12,6 +12,11 @@ Subcommands:
 - ``version``: print the version.
 - ``sim``: one closed-loop run; writes timeseries.csv, metrics.json and plots.
 - ``paper``: reproduces the paper's experiments; writes report.md and figures.
+- ``sumo``: the SUMO plugin (``sumo run``, ``sumo list``).
+- ``compare``: blendtrack against SUMO's own drivers on a scenario, paired by
+  vehicle over several seeds; writes report.md, report.html, comparison.csv.
+
+Ctrl-C prints one line and exits with code 130.
 """
 
 from __future__ import annotations
@@ -266,7 +271,8 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     out = FsPath(args.out)
-    result = sumo.run_scenario(scenario, options, out)
+    # Absolute: SUMO resolves relative output paths against the .sumocfg's folder.
+    result = sumo.run_scenario(scenario, options, out.resolve())
     s = result.summary
     rows = [vars_row for vars_row in result.records if vars_row.steps > 0]
     mean_e = sum(r.sum_abs_e for r in rows) / max(sum(r.steps for r in rows), 1)
@@ -277,6 +283,87 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         f"red-light violations {s['red_light_violations']}"
     )
     return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from blendtrack import sumo
+    from blendtrack.sumo import compare
+
+    scenario = sumo.resolve_scenario(args.scenario)
+    config = vehicle = None
+    keys: set[str] = set()
+    if args.config is not None:
+        if not FsPath(args.config).is_file():
+            raise blendtrack.ConfigError(f"cannot read config file {args.config}: no such file")
+        config, vehicle = blendtrack.load_config(args.config)
+        keys = sumo.config_keys(args.config)
+    run = sumo.RunOptions(
+        alpha=args.alpha,
+        config=config,
+        vehicle=vehicle,
+        fixed_path_width="path_width_m" in keys,
+        fixed_preferred_speed="preferred_speed" in keys,
+    )
+    opts = compare.CompareOptions(
+        baseline=args.baseline,
+        controlled_fraction=args.controlled_fraction,
+        controlled_type=args.controlled_type,
+        seeds=args.seeds,
+        end_s=args.end,
+        run=run,
+        progress=not args.quiet,
+    )
+    out = FsPath(args.out)
+    compare.compare(scenario, opts, out)
+    print(f"{out / 'report.md'}: {scenario.name}, {args.seeds} seed(s), baseline {args.baseline}; also report.html, comparison.csv")
+    return 0
+
+
+def _seeds(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seeds must be a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"seeds must be >= 1, got {text}")
+    return value
+
+
+def _add_compare_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None:
+    cmp = subcommands.add_parser(
+        "compare",
+        help="blendtrack against SUMO's own drivers on a scenario, paired by vehicle, over seeds",
+        description=(
+            "For each seed 0..N-1 runs SCENARIO twice with the same demand, seed and end time: the baseline "
+            "(plain SUMO, every vehicle on SUMO's car-following model) and the treatment (the selected vehicles "
+            "driven by blendtrack). Pairs each controlled vehicle with its baseline twin (same id) and writes "
+            "DIR/comparison.csv (per-vehicle pairs), DIR/network.csv, DIR/report.md and a self-contained "
+            "DIR/report.html (summary table with 95% CIs over seeds, plots, a paragraph made from the numbers), "
+            "and the runs in DIR/runs/. Ctrl-C leaves no report."
+        ),
+    )
+    cmp.add_argument("scenario", metavar="SCENARIO", help="scenario name or folder, or a .sumocfg file")
+    cmp.add_argument(
+        "--baseline",
+        choices=("krauss", "idm", "eidm", "acc"),
+        default="krauss",
+        help="car-following model of every vType in both runs: krauss = as in the scenario (default), or IDM, EIDM, ACC",
+    )
+    which = cmp.add_mutually_exclusive_group()
+    which.add_argument(
+        "--controlled-fraction",
+        type=_finite("fraction", 0.0, high=1.0),
+        metavar="P",
+        help="control this fraction of all vehicles, chosen by a seeded hash of their ids (0..1)",
+    )
+    which.add_argument("--controlled-type", metavar="T", help="control every vehicle of vType T (default: vTypes with blendtrack.controlled=true)")
+    cmp.add_argument("--alpha", type=_finite("alpha", 0.0, high=1.0), metavar="A", help="blend factor for every controlled vehicle")
+    cmp.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
+    cmp.add_argument("--seeds", type=_seeds, default=3, metavar="N", help="run seeds 0..N-1 (default 3)")
+    cmp.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
+    cmp.add_argument("--quiet", action="store_true", help="no progress bar")
+    cmp.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
+    cmp.set_defaults(run=_cmd_compare)
 
 
 def _cmd_sumo_list(args: argparse.Namespace) -> int:
@@ -355,6 +442,7 @@ def _build_parser() -> argparse.ArgumentParser:
     _add_sim_parser(subcommands)
     _add_paper_parser(subcommands)
     _add_sumo_parser(subcommands)
+    _add_compare_parser(subcommands)
     return parser
 
 
@@ -370,6 +458,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as e:
         print(f"blendtrack {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"blendtrack {args.command}: interrupted", file=sys.stderr)
+        return 130
     return exit_code
 
 
