@@ -206,7 +206,8 @@ class SumoRun:
     def __init__(self, scenario: Scenario, options: RunOptions, out_dir: Path | None = None):
         self.scenario = scenario
         self.opt = options
-        self.out_dir = out_dir
+        # Absolute: SUMO resolves relative output paths against the scenario's folder.
+        self.out_dir = out_dir.resolve() if out_dir is not None else None
         self.base_config = (options.config or ControllerConfig()).replace(use_path_widths=not options.fixed_path_width)
         self.base_vehicle = options.vehicle or VehicleParams()
         if options.alpha is not None:
