@@ -803,7 +803,7 @@ impl Path {
             (d2, k0, t)
         };
         let mut scanned = 1usize;
-        let mut consider = |k: usize, best: &mut (f64, usize, f64)| -> bool {
+        let consider = |k: usize, best: &mut (f64, usize, f64)| -> bool {
             let (d2, t) = self.seg_dist2(k, p);
             let better = d2 < best.0;
             if better {
