@@ -241,17 +241,26 @@ def _add_paper_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> Non
     paper.set_defaults(run=_cmd_paper)
 
 
+def _sumo_config(
+    file: str | None,
+) -> tuple[blendtrack.ControllerConfig | None, blendtrack.VehicleParams | None, set[str]]:
+    """The --config file of the SUMO commands: (controller, vehicle, keys the
+    file sets in [controller]); all empty without a file."""
+    from blendtrack import sumo
+
+    if file is None:
+        return None, None, set()
+    if not FsPath(file).is_file():
+        raise blendtrack.ConfigError(f"cannot read config file {file}: no such file")
+    config, vehicle = blendtrack.load_config(file)
+    return config, vehicle, sumo.config_keys(file)
+
+
 def _cmd_sumo_run(args: argparse.Namespace) -> int:
     from blendtrack import sumo
 
     scenario = sumo.resolve_scenario(args.scenario)
-    config = vehicle = None
-    keys: set[str] = set()
-    if args.config is not None:
-        if not FsPath(args.config).is_file():
-            raise blendtrack.ConfigError(f"cannot read config file {args.config}: no such file")
-        config, vehicle = blendtrack.load_config(args.config)
-        keys = sumo.config_keys(args.config)
+    config, vehicle, keys = _sumo_config(args.config)
     options = sumo.RunOptions(
         controlled_fraction=args.controlled_fraction,
         controlled_type=args.controlled_type,
@@ -271,8 +280,7 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         progress=not args.quiet,
     )
     out = FsPath(args.out)
-    # Absolute: SUMO resolves relative output paths against the .sumocfg's folder.
-    result = sumo.run_scenario(scenario, options, out.resolve())
+    result = sumo.run_scenario(scenario, options, out)
     s = result.summary
     rows = [vars_row for vars_row in result.records if vars_row.steps > 0]
     mean_e = sum(r.sum_abs_e for r in rows) / max(sum(r.steps for r in rows), 1)
@@ -290,13 +298,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from blendtrack.sumo import compare
 
     scenario = sumo.resolve_scenario(args.scenario)
-    config = vehicle = None
-    keys: set[str] = set()
-    if args.config is not None:
-        if not FsPath(args.config).is_file():
-            raise blendtrack.ConfigError(f"cannot read config file {args.config}: no such file")
-        config, vehicle = blendtrack.load_config(args.config)
-        keys = sumo.config_keys(args.config)
+    config, vehicle, keys = _sumo_config(args.config)
     run = sumo.RunOptions(
         alpha=args.alpha,
         config=config,
