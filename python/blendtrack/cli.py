@@ -258,13 +258,14 @@ def _sumo_config(
 
 def _cmd_sumo_run(args: argparse.Namespace) -> int:
     from blendtrack import sumo
+    from blendtrack.sumo.runner import parse_ids
 
     scenario = sumo.resolve_scenario(args.scenario)
     config, vehicle, keys = _sumo_config(args.config)
     options = sumo.RunOptions(
         controlled_fraction=args.controlled_fraction,
         controlled_type=args.controlled_type,
-        controlled_ids=tuple(x for v in args.controlled_ids or () for x in v.split(",") if x),
+        controlled_ids=parse_ids(args.controlled_ids or ()),
         alpha=args.alpha,
         config=config,
         vehicle=vehicle,

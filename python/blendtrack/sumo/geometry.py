@@ -72,6 +72,8 @@ class RouteGeometry:
     #: (edge index in ``edges``, target lane index) when the track stops at
     #: the end of a lane that does not continue and a lane change is due.
     pending_change: tuple[int, int] | None = None
+    #: Total arc length (m).
+    length_m: float = 0.0
 
     def __post_init__(self) -> None:
         # Plain-list copies for the per-vehicle, per-step look-ups of the
@@ -84,19 +86,6 @@ class RouteGeometry:
     def piece_index_at(self, s: float) -> int:
         """Index of the piece holding arc length ``s`` (clamped to the pieces)."""
         return min(max(bisect.bisect_right(self.starts, s) - 1, 0), len(self.starts) - 1)
-
-    #: Total arc length (m).
-    length_m: float = 0.0
-
-    def lane_at(self, s: float) -> tuple[str, int, str]:
-        """(edge id, lane index, lane id) of the piece holding arc length ``s``."""
-        i = self.piece_index_at(s)
-        return self.piece_edge[i], self.piece_index[i], self.piece_lane[i]
-
-    def piece_of(self, s: np.ndarray) -> np.ndarray:
-        """Index of the piece holding each arc length in ``s`` (vectorised)."""
-        i = np.searchsorted(self.piece_start_s, s, side="right") - 1
-        return np.clip(i, 0, len(self.piece_lane) - 1)
 
 
 def _resample(shape: np.ndarray, spacing_m: float) -> np.ndarray:

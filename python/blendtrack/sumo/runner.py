@@ -226,7 +226,9 @@ class SumoRun:
         self._net: Any = None
         self._samples: list[tuple[float, float, float, float]] = []
         self._trace_rows: list[tuple[Any, ...]] = []
-        self.counts = {"collisions": 0, "teleports": 0, "red_light_violations": 0, "vanished": 0, "takeover_failures": 0}
+        # Events with no per-vehicle record; collisions, teleports and red-light
+        # crossings are summed from the records.
+        self.counts = {"vanished": 0, "takeover_failures": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         self.cheap_moves = 0
         #: (time, vehicle, traffic light, link index, front before, front after, stop line) of each red-light crossing.
@@ -513,9 +515,9 @@ class SumoRun:
             "step_length_s": self.dt,
             "controlled_vehicles": controlled,
             "background_vehicles": len(self._background),
-            "collisions": self.counts["collisions"],
-            "teleports": self.counts["teleports"],
-            "red_light_violations": self.counts["red_light_violations"],
+            "collisions": sum(r.collisions for r in self.records),
+            "teleports": sum(r.teleports for r in self.records),
+            "red_light_violations": sum(r.red_light_violations for r in self.records),
             "vanished": self.counts["vanished"],
             "speed_warnings": sum(r.speed_warnings for r in self.records),
             "reverse_warnings": sum(r.reverse_warnings for r in self.records),
@@ -561,11 +563,9 @@ class SumoRun:
                 self._drop(vid, t, "arrived")
             for vid in ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ()):
                 if vid in self.active:
-                    self.counts["teleports"] += 1
                     self._drop(vid, t, "teleport")
             for vid in ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ()):
                 if vid in self.active:
-                    self.counts["collisions"] += 1
                     self._drop(vid, t, "collision")
             for vid in ev.get(tc.VAR_DEPARTED_VEHICLES_IDS, ()):
                 if vid in self._seen:
@@ -804,7 +804,6 @@ class SumoRun:
                 if tls and old_sf < s_stop <= sf_new and self._tls_char(tls, link) in "rR":
                     rec.red_light_violations += 1
                     self.violations.append((t, vid, tls, link, old_sf, sf_new, s_stop))
-                    self.counts["red_light_violations"] += 1
             self._s_front[vid] = sf_new
             prev_v = self._state[vid][3]
             self._state[vid] = (x, y, th, v, d)
