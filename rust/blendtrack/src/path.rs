@@ -95,6 +95,9 @@ pub struct Path {
     closed: bool,
     length: f64,
     chunk_boxes: Vec<(Point2<f64>, Point2<f64>)>,
+    /// `bucket[b]` = the segment holding arc length `b * length / n_seg`:
+    /// O(1) arc-length look-ups also on unevenly sampled paths.
+    bucket: Vec<u32>,
     tangent_sampling_width_m: f64,
     window_back_m: f64,
     window_ahead_m: f64,
@@ -232,7 +235,15 @@ impl Path {
                 (lo, hi)
             })
             .collect();
+        let n_seg = seg_len.len();
+        let bucket = (0..n_seg)
+            .map(|b| {
+                let at = b as f64 * length / n_seg as f64;
+                s[1..n_seg].partition_point(|&x| x <= at) as u32
+            })
+            .collect();
         Ok(Path {
+            bucket,
             points: pts,
             s,
             seg_dir,
@@ -552,13 +563,18 @@ impl Path {
     fn locate(&self, s: f64) -> (usize, f64) {
         let s = self.wrap_s(s);
         let n_seg = self.seg_len.len();
-        // Interpolation guess (exact for evenly sampled paths), a few steps of
-        // walking, then binary search: O(1) for the paths we build.
+        // The bucket of `s` names the segment holding the bucket's start; a
+        // few steps forward find the one holding `s` (one step on evenly
+        // sampled paths), else binary search.
         if s.is_finite() && s > 0.0 {
-            let mut k = (((s / self.length) * n_seg as f64) as usize).min(n_seg - 1);
-            for _ in 0..4 {
+            let b = (((s / self.length) * n_seg as f64) as usize).min(n_seg - 1);
+            let mut k = self.bucket[b] as usize;
+            for _ in 0..8 {
                 if s < self.s[k] {
-                    k -= 1; // s > 0 = s[0], so k > 0 here
+                    if k == 0 {
+                        break;
+                    }
+                    k -= 1;
                 } else if k + 1 < n_seg && s >= self.s[k + 1] {
                     k += 1;
                 } else {
@@ -882,6 +898,28 @@ fn check_positive(name: &'static str, v: f64) -> Result<(), PathError> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn arc_length_lookup_is_exact_on_unevenly_sampled_paths() {
+        // Segment lengths from 0.01 m to 40 m, as SUMO lane shapes have.
+        let mut pts = vec![[0.0, 0.0]];
+        let mut x = 0.0;
+        for i in 0..300 {
+            x += [0.01, 0.3, 40.0, 1.0, 2.5, 0.05][i % 6];
+            pts.push([x, 0.1 * (i as f64).sin()]);
+        }
+        for closed in [false, true] {
+            let p = Path::new(&pts, None, closed).unwrap();
+            let n_seg = p.n_segments();
+            // [0, length): a closed path wraps `length` to 0.
+            for j in 0..20_000 {
+                let s = p.length() * j as f64 / 20_000.0;
+                let k = p.s[1..n_seg].partition_point(|&b| b <= s);
+                assert_eq!(p.segment_at(s), k, "s = {s}");
+            }
+        }
+    }
+
     use super::*;
 
     #[test]
