@@ -302,6 +302,19 @@ impl Fleet {
         Ok(())
     }
 
+    /// Moves a vehicle to another track (a lane change, a new route),
+    /// keeping its configuration and limits; its projection hints start over.
+    pub fn set_vehicle_track(&mut self, slot: i64, track_id: i64) -> Result<(), FleetError> {
+        let track = self.track_entry(track_id)?.track.clone();
+        let i = self.index(slot)?;
+        let e = self.slots[i]
+            .as_mut()
+            .expect("index() checked the slot is in use");
+        e.controller = Controller::new(track, e.controller.config().clone(), &e.params)?;
+        e.track_id = track_id as usize;
+        Ok(())
+    }
+
     /// Forgets a vehicle's projection hints (after a teleport: the next step
     /// searches its whole track).
     pub fn reset_vehicle(&mut self, slot: i64) -> Result<(), FleetError> {
