@@ -122,6 +122,44 @@ def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -
     assert all(r.end_s >= r.depart_s for r in result.records)
 
 
+def test_rerouted_vehicle_gets_a_new_track_and_drives_on(tmp_path: Path) -> None:
+    """A route changed by another client (a new destination) is noticed and
+    the track rebuilt; the vehicle is neither dropped nor stopped."""
+    sc = sumo.resolve_scenario("urban_grid")
+    run = SumoRun(sc, RunOptions(end_s=220, progress=False), tmp_path)
+    changed: list[tuple[str, tuple[str, ...]]] = []
+
+    def reroute(r: SumoRun, t: float) -> None:
+        if changed or t < 30.0:
+            return
+        v = r.sumo.vehicle
+        for vid in sorted(r.active):
+            old = tuple(v.getRoute(vid))
+            if v.getRouteIndex(vid) != 0 or v.getLanePosition(vid) > 30.0:
+                continue
+            for target in sorted(r.sumo.edge.getIDList()):
+                if target.startswith(":") or target in old:
+                    continue
+                try:
+                    v.changeTarget(vid, target)
+                except Exception:
+                    continue  # not reachable from here
+                changed.append((vid, tuple(v.getRoute(vid))))
+                return
+
+    run.step_hooks.append(reroute)
+    result = run.run()
+    assert changed, "some controlled vehicle could be sent elsewhere"
+    vid, new_route = changed[0]
+    assert result.summary["reroutes"] >= 1
+    rec = {r.vid: r for r in result.records}[vid]
+    assert rec.reason == "arrived", rec.reason
+    assert rec.collisions == 0 and rec.max_abs_e < 0.5, (rec.collisions, rec.max_abs_e)
+    # ... at the new destination.
+    trips = {t.get("id"): t.attrib for t in ET.parse(tmp_path / "sumo" / "tripinfo.xml").getroot().iter("tripinfo")}
+    assert trips[vid]["arrivalLane"].rsplit("_", 1)[0] == new_route[-1]
+
+
 def test_traci_backend_matches_libsumo(tmp_path: Path) -> None:
     """The --gui code path (TraCI over a socket), exercised with the plain sumo binary."""
     sc = sumo.resolve_scenario("rural_loop")

@@ -10,6 +10,8 @@ callers need, so ``_blendtrack`` itself stays private.
 - ``simulate``: one closed-loop run in Rust -> (pandas DataFrame, metrics dict);
   ``compute_metrics`` applies the same metrics to recorded columns.
 - ``Fleet``: many vehicles on many tracks stepped in one call (numpy in/out).
+- ``RouteFleet``: a Fleet driving road routes among traffic (lane pieces,
+  stop lines, signals, per-vehicle statistics): the SUMO plugin's engine.
 - Errors: ``BlendtrackError`` and its subclasses ``ConfigError``,
   ``PathError``, ``SimulationError``, ``InputError`` (also a ``ValueError``).
 """
@@ -22,6 +24,7 @@ from blendtrack._blendtrack import (
     InputError,
     Path,
     PathError,
+    RouteFleet,
     SimulationError,
     VehicleParams,
     __version__,
@@ -40,6 +43,7 @@ __all__ = [
     "METRIC_KEYS",
     "Path",
     "PathError",
+    "RouteFleet",
     "SimulationError",
     "VehicleParams",
     "__version__",

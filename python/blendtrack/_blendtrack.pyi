@@ -25,6 +25,7 @@ __all__ = [
     "compute_metrics",
     "stopping_accel",
     "Fleet",
+    "RouteFleet",
 ]
 
 __version__: str
@@ -193,5 +194,81 @@ class Fleet:
         speed_limit: _ArrayLike | None = None,
         dt: float | None = None,
     ) -> dict[str, npt.NDArray[Any]]: ...
+
+@final
+class RouteFleet:
+    def __new__(
+        cls,
+        *,
+        standstill_margin_m: float = 1.0,
+        yield_lookahead_m: float = 30.0,
+        lane_change_room_m: float = 15.0,
+        route_end_extra_m: float = 5.0,
+        route_end_horizon_m: float = 200.0,
+        lane_move_lateral_m: float = 0.15,
+        lane_move_heading_deg: float = 2.0,
+        comfort_lateral_accel_mps2: float = 2.0,
+        sample_every: int = 10,
+    ) -> RouteFleet: ...
+    def add_route(
+        self,
+        path: Path,
+        config: ControllerConfig | None,
+        *,
+        piece_start_m: _ArrayLike,
+        piece_scale: _ArrayLike,
+        piece_plain: _ArrayLike,
+        piece_speed_mps: _ArrayLike,
+        piece_lane: _ArrayLike,
+        piece_edge: _ArrayLike,
+        piece_lane_index: _ArrayLike,
+        length_m: float,
+        stop_s_m: _ArrayLike | None = None,
+        stop_light: _ArrayLike | None = None,
+        stop_link: _ArrayLike | None = None,
+        stop_major: _ArrayLike | None = None,
+        stop_via: _ArrayLike | None = None,
+        stop_exit_m: _ArrayLike | None = None,
+        lane_change: tuple[int, int] | None = None,
+    ) -> int: ...
+    def add_vehicle(
+        self,
+        track_id: int,
+        config: ControllerConfig | None,
+        vehicle: VehicleParams | None,
+        *,
+        reach_m: float,
+        length_m: float,
+        min_gap_m: float,
+        x: float,
+        y: float,
+        theta: float,
+        v: float,
+        delta: float = 0.0,
+    ) -> int: ...
+    def retrack(self, slot: int, track_id: int) -> None: ...
+    def remove_vehicle(self, slot: int) -> dict[str, float]: ...
+    def stats(self, slot: int) -> dict[str, float]: ...
+    def state(self, slot: int) -> tuple[float, float, float, float, float]: ...
+    def s_front(self, slot: int) -> float: ...
+    def next_stop(self, slot: int) -> tuple[float, int, int, bool, int, float] | None: ...
+    def vehicle_config(self, slot: int) -> ControllerConfig: ...
+    def vehicle_params(self, slot: int) -> VehicleParams: ...
+    def vehicle_track(self, slot: int) -> int: ...
+    def set_signal(self, light: int, state: str) -> None: ...
+    def plan(
+        self,
+        slots: _ArrayLike,
+        leader_gap: _ArrayLike,
+        leader_slot: _ArrayLike,
+        leader_speed: _ArrayLike,
+        lane: _ArrayLike,
+        lane_pos: _ArrayLike,
+    ) -> npt.NDArray[np.int64]: ...
+    def step(self, must_yield: _ArrayLike, dt: float) -> dict[str, npt.NDArray[Any]]: ...
+    def take_samples(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def n_tracks(self) -> int: ...
+    def __len__(self) -> int: ...
 
 def stopping_accel(v_mps: float, gap_m: float, v_l_mps: float, s0_m: float, tau_s: float, b_f_mps2: float, b_l_mps2: float) -> float: ...

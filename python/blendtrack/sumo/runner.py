@@ -2,31 +2,41 @@
 
 One :class:`SumoRun` owns one SUMO simulation (in-process through libsumo by
 default, or over TraCI sockets, which sumo-gui needs) and a
-:class:`blendtrack.Fleet`. Each simulation step:
+:class:`blendtrack.RouteFleet`, which keeps every controlled vehicle's state,
+route, stop-line decisions and statistics in Rust. Each simulation step:
 
 1. SUMO advances (``simulationStep``); the per-step event lists (departed,
    arrived, teleporting, colliding) arrive through one simulation
    subscription.
 2. Vehicles that left (arrived, teleported, collided, removed by another
-   client) are dropped from the fleet; newly departed ones that are selected
-   are taken over: their state is initialised from SUMO's pose and speed,
-   and their reference track is the centreline of their lane along their
-   route (:mod:`blendtrack.sumo.geometry`), shared by every vehicle on the
-   same route and lane.
-3. The leader of every controlled vehicle comes from a vehicle subscription
-   (``VAR_LEADER``), traffic-light states from one subscription per light;
-   stop lines of red or yellow lights ahead and the leader become obstacles.
-4. One ``Fleet.step`` call computes every controlled vehicle's command and
+   client) are dropped; newly departed ones that are selected are taken
+   over: their state is initialised from SUMO's pose and speed, and their
+   reference track is the centreline of their lane along their route
+   (:mod:`blendtrack.sumo.geometry`), shared by every vehicle on the same
+   route and lane, registered once with its lane pieces and stop lines.
+3. The leader of every controlled vehicle is read from SUMO (its gap; its
+   speed unless blendtrack drives it too), and traffic-light states from one
+   subscription per light. ``RouteFleet.plan`` turns red and yellow lights,
+   links without priority, blocked junction exits and the route's end into
+   stop lines; for links without priority it asks which vehicles must
+   check SUMO for approaching foes (``getNextLinks``).
+4. ``RouteFleet.step`` computes every controlled vehicle's command and
    integrates its kinematic bicycle over the step, in Rust with the
-   interpreter released.
-5. Each new pose is pushed with ``moveToXY`` (front-bumper centre, SUMO
-   angle, keepRoute = 3 with the edge and lane as hints): SUMO keeps the
-   route, so other drivers see the vehicle at junctions and behind them.
+   interpreter released, and says how to push each new pose to SUMO.
+5. A vehicle on its lane's centreline moves with ``moveTo`` (lane, position)
+   and ``setSpeed``: cheap, and SUMO keeps it on its lanes. Elsewhere (junction
+   lanes, lane changes, off-centre) it moves with ``moveToXY`` (front-bumper
+   centre, SUMO angle, keepRoute = 3 with the edge and lane as hints) and
+   ``setSpeed``: SUMO keeps the route, so other drivers see the vehicle at
+   junctions and behind them.
 
-blendtrack's state is authoritative for controlled vehicles; SUMO displays
-them and makes everybody else react to them. What SUMO cannot represent is
-counted, not hidden: a speed above the lane limit, or driving backwards
-(SUMO takes displacement as forward speed), increments a warning count.
+Python does only the SUMO calls, about three per controlled vehicle and step
+(leader, move, speed); everything per vehicle that needs no SUMO call is in
+Rust. blendtrack's state is authoritative for controlled vehicles; SUMO
+displays them and makes everybody else react to them. What SUMO cannot
+represent is counted, not hidden: a speed above the lane limit, or driving
+backwards (SUMO takes displacement as forward speed), increments a warning
+count.
 """
 
 from __future__ import annotations
@@ -43,7 +53,7 @@ from typing import Any
 import numpy as np
 
 import blendtrack
-from blendtrack import ControllerConfig, Fleet, VehicleParams
+from blendtrack import ControllerConfig, RouteFleet, VehicleParams
 from blendtrack.sumo.geometry import RouteGeometry, route_geometry
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 
@@ -62,6 +72,11 @@ CHEAP_HEADING_RAD = math.radians(2.0)
 LANE_CHANGE_ROOM_M = 15.0
 # How far before a junction without priority a vehicle asks SUMO whether foes approach (m).
 YIELD_LOOKAHEAD_M = 30.0
+# A controlled vehicle's route id is compared with SUMO's every this many steps
+# (rerouting is rare; a move SUMO rejects triggers the check at once).
+ROUTE_CHECK_EVERY = 10
+# RouteFleet move codes.
+_SPEED, _LANE, _XY, _INVALID = 0, 1, 2, 3
 
 
 def _sumo_home() -> str:
@@ -167,22 +182,16 @@ class VehicleRecord:
 
 @dataclass
 class _Active:
-    """A vehicle under control."""
+    """A vehicle under control (its state and statistics live in the RouteFleet)."""
 
     vid: str
     slot: int
     geo: RouteGeometry
-    wheelbase_m: float
-    front_overhang_m: float
-    min_gap_m: float
-    length_m: float
     route_id: str
     record: VehicleRecord
-    config: ControllerConfig
-    next_stop: int = 0
-    #: (stop index, stop?) decided when the light ahead turned yellow.
-    yellow_decision: tuple[int, bool] | None = None
     trajectory: list[tuple[float, float, float, float, float, float]] | None = None
+    #: While a lane change is under way: (+1 left or -1 right, target lane index).
+    changing: tuple[int, int] | None = None
 
 
 @dataclass
@@ -212,26 +221,39 @@ class SumoRun:
         self.base_vehicle = options.vehicle or VehicleParams()
         if options.alpha is not None:
             self.base_config = self.base_config.replace(lat_blend_factor=options.alpha)
-        self.fleet = Fleet()
+        self.fleet = RouteFleet(
+            standstill_margin_m=options.standstill_margin_m,
+            yield_lookahead_m=YIELD_LOOKAHEAD_M,
+            lane_change_room_m=LANE_CHANGE_ROOM_M,
+            lane_move_lateral_m=CHEAP_LATERAL_M,
+            lane_move_heading_deg=math.degrees(CHEAP_HEADING_RAD),
+            comfort_lateral_accel_mps2=scenario.comfort_lateral_accel_mps2,
+        )
         self.active: dict[str, _Active] = {}
         self.records: list[VehicleRecord] = []
-        self._geo_cache: dict[tuple[tuple[str, ...], int], tuple[RouteGeometry, int, blendtrack.Path]] = {}
-        self._state: dict[str, tuple[float, float, float, float, float]] = {}
-        self._s_front: dict[str, float] = {}
+        self._geo_cache: dict[tuple[tuple[str, ...], int], tuple[RouteGeometry, int]] = {}
+        # SUMO's string ids interned as the small integers RouteFleet takes.
+        self._lanes = _Interned()
+        self._edges = _Interned()
+        self._lights = _Interned()
         self._trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         self._type_cache: dict[str, dict[str, Any]] = {}
         self._seen: set[str] = set()
         self._background: set[str] = set()
-        self._tls_state: dict[str, str] = {}
         self._net: Any = None
-        self._samples: list[tuple[float, float, float, float]] = []
+        self._tls_state: dict[str, str] = {}
         self._trace_rows: list[tuple[Any, ...]] = []
+        #: Vehicles whose SUMO lane position blendtrack does not know (read next step).
+        self._read_position: set[str] = set()
+        #: Vehicles where a lane change is due: (vid, lane, lane position, speed).
+        self._lane_change_due: list[tuple[str, int, float, float]] = []
+        self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         self.cheap_moves = 0
-        #: (time, vehicle, traffic light, link index, front before, front after, stop line) of each red-light crossing.
+        #: (time, vehicle, traffic light, link index, stop line arc length) of each red-light crossing.
         self.violations: list[tuple[Any, ...]] = []
         self.xy_moves = 0
         self.sumo: Any = None
@@ -404,16 +426,41 @@ class SumoRun:
 
     def _geometry(
         self, edges: tuple[str, ...], lane_index: int, change: tuple[float, float] | None = None
-    ) -> tuple[RouteGeometry, int, blendtrack.Path]:
-        """The track of a route from a lane; shared by every vehicle on the same
-        route and lane (a track with a lane change in it belongs to one vehicle)."""
+    ) -> tuple[RouteGeometry, int]:
+        """The track of a route from a lane, registered with its lane pieces and
+        stop lines; shared by every vehicle on the same route and lane (a track
+        with a lane change in it belongs to one vehicle)."""
         key = (edges, lane_index)
         hit = self._geo_cache.get(key) if change is None else None
         if hit is None:
             geo = route_geometry(self._net_geometry(), edges, lane_index, defer_changes=True, change=change)
             path = blendtrack.Path(geo.points, geo.widths, closed=False)
-            track = self.fleet.add_track(path, self.base_config)
-            hit = (geo, track, path)
+            lanes, edge_ids = self._lanes, self._edges
+            stops = geo.stops
+            track = self.fleet.add_route(
+                path,
+                self.base_config,
+                piece_start_m=geo.piece_start_s,
+                piece_scale=geo.piece_scale,
+                piece_plain=geo.piece_plain.astype(np.int64),
+                piece_speed_mps=geo.piece_speed,
+                piece_lane=[lanes.id(x) for x in geo.piece_lane],
+                piece_edge=[edge_ids.id(x) for x in geo.piece_edge],
+                piece_lane_index=geo.piece_index,
+                length_m=geo.length_m,
+                stop_s_m=[st[0] for st in stops],
+                stop_light=[self._lights.id(st[1]) if st[1] else -1 for st in stops],
+                stop_link=[st[2] for st in stops],
+                stop_major=[int(st[3]) for st in stops],
+                stop_via=[lanes.id(st[4]) for st in stops],
+                stop_exit_m=[st[5] for st in stops],
+                lane_change=(
+                    (edge_ids.id(geo.edges[geo.pending_change[0]]), geo.pending_change[1])
+                    if geo.pending_change is not None
+                    else None
+                ),
+            )
+            hit = (geo, track)
             if change is None:
                 self._geo_cache[key] = hit
         return hit
@@ -428,37 +475,27 @@ class SumoRun:
         if not edges:
             return
         lane_index = int(v.getLaneIndex(vid))
-        geo, track, path = self._geometry(edges, max(lane_index, 0))
+        geo, track = self._geometry(edges, max(lane_index, 0))
         veh: VehicleParams = info["vehicle"]
         cfg: ControllerConfig = info["config"]
         if not self.opt.fixed_preferred_speed and PARAM_PREFIX + "preferred_speed" not in info["param_keys"]:
             cfg = cfg.replace(preferred_speed=info["max_speed"] * float(v.getSpeedFactor(vid)))
-        slot = self.fleet.add_vehicle(track, cfg, veh)
         x, y = v.getPosition(vid)
-        angle = float(v.getAngle(vid))
-        theta = math.pi / 2.0 - math.radians(angle)
+        theta = math.pi / 2.0 - math.radians(float(v.getAngle(vid)))
         overhang = max(0.5 * (info["length"] - veh.wheelbase_m), 0.0)
-        back = veh.wheelbase_m + overhang
-        state = (x - back * math.cos(theta), y - back * math.sin(theta), theta, float(v.getSpeed(vid)), 0.0)
+        reach = veh.wheelbase_m + overhang
+        slot = self.fleet.add_vehicle(
+            track, cfg, veh,
+            reach_m=reach, length_m=info["length"], min_gap_m=info["min_gap"],
+            x=x - reach * math.cos(theta), y=y - reach * math.sin(theta), theta=theta, v=float(v.getSpeed(vid)),
+        )
         rec = VehicleRecord(vid=vid, vtype=vtype, depart_s=t)
         self.records.append(rec)
-        act = _Active(
-            vid=vid,
-            slot=slot,
-            geo=geo,
-            wheelbase_m=veh.wheelbase_m,
-            front_overhang_m=overhang,
-            min_gap_m=info["min_gap"],
-            length_m=info["length"],
-            route_id=v.getRouteID(vid),
-            record=rec,
-            config=cfg,
-        )
+        act = _Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec)
         if len(self._trajectories) + sum(a.trajectory is not None for a in self.active.values()) < self.opt.keep_trajectories or self.opt.keep_trajectories < 0:
             act.trajectory = []
-        self._s_front[vid] = float(path.project(x, y)["s_m"])
         self.active[vid] = act
-        self._state[vid] = state
+        self._read_position.add(vid)
         v.setSpeedMode(vid, 0)
         v.setLaneChangeMode(vid, 0)
         if self._use_subscriptions:
@@ -468,12 +505,12 @@ class SumoRun:
 
     def _drop(self, vid: str, t: float, reason: str) -> None:
         act = self.active.pop(vid, None)
-        self._state.pop(vid, None)
-        self._s_front.pop(vid, None)
+        self._read_position.discard(vid)
         if act is None:
             return
-        self.fleet.remove_vehicle(act.slot)
         rec = act.record
+        for key, value in self.fleet.remove_vehicle(act.slot).items():
+            setattr(rec, key, value)
         rec.end_s = t
         rec.reason = reason
         if act.trajectory is not None and act.trajectory:
@@ -526,8 +563,9 @@ class SumoRun:
             "comfort_lateral_accel_mps2": self.scenario.comfort_lateral_accel_mps2,
             "moves_lane_position": self.cheap_moves,
             "moves_xy": self.xy_moves,
+            "reroutes": self.counts["reroutes"],
         }
-        samples = np.array(self._samples) if self._samples else np.zeros((0, 4))
+        samples = self.fleet.take_samples()
         return RunResult(self.records, summary, self._trajectories, samples)
 
     def _time(self) -> float:
@@ -590,324 +628,257 @@ class SumoRun:
             bar.close()
         return steps
 
-    def _read_controlled(self) -> dict[str, dict[int, Any]]:
-        """Lane, lane position, route id and leader of every controlled vehicle
-        still in the simulation, keyed like subscription results.
+    def _observe(self, t: float) -> tuple[list[str], list[_Active], list[Any]]:
+        """Leaders, and where needed lane positions, of every controlled vehicle
+        still in the simulation; drops the ones that vanished without an event.
 
         Over TraCI these come from vehicle subscriptions (one socket round trip
         for all). With libsumo 1.28 a vehicle subscription breaks every later
         ``simulationStep`` ("Vehicle 'x' is not known") once another client
         removes the subscribed vehicle, so there the same values come from
-        in-process getters (about a microsecond each, no cheaper through a
-        subscription) and the simulation survives such removals.
+        in-process getters (about a microsecond each), and only the ones
+        needed: the leader every step, the lane position only where blendtrack
+        does not know it, the route id every ``ROUTE_CHECK_EVERY`` steps.
         """
-        sumo = self.sumo
+        v = self.sumo.vehicle
         tc = self._tc
+        active = self.active
+        ids: list[str] = []
+        acts: list[_Active] = []
+        gaps: list[float] = []
+        lslots: list[int] = []
+        lspeeds: list[float] = []
+        lanes: list[int] = []
+        poss: list[float] = []
+        nan = math.nan
+        lane_id = self._lanes.get
+        read = self._read_position
         if self._use_subscriptions:
-            return sumo.vehicle.getAllSubscriptionResults()  # type: ignore[no-any-return]
-        v = sumo.vehicle
-        present = set(v.getIDList())
-        out: dict[str, dict[int, Any]] = {}
-        for vid in self.active:
-            if vid not in present:
-                continue
-            out[vid] = {
-                tc.VAR_ROUTE_ID: v.getRouteID(vid),
-                tc.VAR_LANE_ID: v.getLaneID(vid),
-                tc.VAR_LANEPOSITION: v.getLanePosition(vid),
-                tc.VAR_LEADER: v.getLeader(vid, LEADER_RANGE_M),
-            }
-        return out
-
-    def _control_step(self, t: float, comfort: float) -> None:
-        sumo = self.sumo
-        tc = self._tc
-        subs = self._read_controlled()
-        ids = []
-        for vid in list(self.active):
-            r = subs.get(vid)
-            if r is None:
+            res = v.getAllSubscriptionResults()
+        else:
+            present = set(v.getIDList())
+            check = self._steps % ROUTE_CHECK_EVERY
+            get_leader = v.getLeader
+        for vid, act in list(active.items()):
+            if self._use_subscriptions:
+                r = res.get(vid)
+                if r is None:
+                    lead = None
+                else:
+                    if r.get(tc.VAR_ROUTE_ID, act.route_id) != act.route_id:
+                        self._rebuild(act)
+                    lead = r.get(tc.VAR_LEADER)
+                    lane, pos = lane_id(r.get(tc.VAR_LANE_ID, ""), -1), float(r.get(tc.VAR_LANEPOSITION, nan))
+            else:
+                r = vid in present
+                if r:
+                    if act.slot % ROUTE_CHECK_EVERY == check and v.getRouteID(vid) != act.route_id:
+                        self._rebuild(act)
+                    lead = get_leader(vid, LEADER_RANGE_M)
+                    if vid in read:
+                        lane, pos = lane_id(v.getLaneID(vid), -1), v.getLanePosition(vid)
+                    else:
+                        lane, pos = -1, nan
+            if not r:
                 # Removed by another client (or otherwise gone) without an event.
                 self.counts["vanished"] += 1
                 self._drop(vid, t, "vanished")
                 continue
-            act = self.active[vid]
-            rid = r.get(tc.VAR_ROUTE_ID)
-            if rid is not None and rid != act.route_id:
-                self._rebuild(act)
+            if act.changing is not None:
+                lead = self._changing_leader(act, lead)
             ids.append(vid)
-        n = len(ids)
-        if n == 0:
-            return
-        if self._has_tls:
-            self._refresh_tls()
-        acts = [self.active[v] for v in ids]
-        st = np.array([self._state[v] for v in ids])
-        leader_gap = np.full(n, np.nan)
-        leader_speed = np.full(n, np.nan)
-        stop_gap = np.full(n, np.nan)
-        limit = np.empty(n)
-        s_front = np.empty(n)
-        speeds = st[:, 3]
-        margin = self.opt.standstill_margin_m
-        for i, (vid, act) in enumerate(zip(ids, acts)):
-            lead = subs[vid].get(tc.VAR_LEADER)
+            acts.append(act)
+            lanes.append(lane)
+            poss.append(pos)
             if lead and lead[0] and lead[1] >= -100.0:
                 lid, gap = lead
-                # SUMO's gap already leaves out the vType's minGap, and SUMO
-                # counts anything closer than minGap as a collision: plan to
-                # stop standstill_margin_m further back still.
-                leader_gap[i] = gap - margin
-                other = self._state.get(lid)
-                leader_speed[i] = other[3] if other is not None else sumo.vehicle.getSpeed(lid)
-            if act.geo.pending_change is not None:
-                self._try_lane_change(act, subs[vid], speeds[i])
-            geo = act.geo
-            sf = self._s_front.get(vid, math.nan)
-            s_front[i] = sf
-            limit[i] = geo.speeds[geo.piece_index_at(sf) if sf == sf else 0]
-            # The next signalised stop line ahead of the front bumper.
-            while act.next_stop < len(geo.stops) and sf == sf and geo.stops[act.next_stop][0] < sf - 0.5:
-                act.next_stop += 1
-            if act.next_stop < len(geo.stops) and sf == sf:
-                s_stop, tls, link, major, via, s_exit = geo.stops[act.next_stop]
-                gap = s_stop - sf - margin
-                state = self._tls_char(tls, link) if tls else ("G" if major else "m")
-                if state not in "yY":
-                    act.yellow_decision = None
-                if state in "rRu":
-                    stop_gap[i] = gap
-                elif state in "yY":
-                    # Yellow: stop when the stopping law manages it at the
-                    # planning deceleration, otherwise clear the junction. The
-                    # decision holds until the light changes: re-deciding every
-                    # step flips to "go" as the stop nears (the law brakes
-                    # harder than b_f at the end) and then fails to stop at red.
-                    if act.yellow_decision is None or act.yellow_decision[0] != act.next_stop:
-                        act.yellow_decision = (act.next_stop, self._can_stop(act, abs(speeds[i]), gap))
-                    if act.yellow_decision[1]:
-                        stop_gap[i] = gap
-                elif (
-                    gap < YIELD_LOOKAHEAD_M
-                    and leader_gap[i] == leader_gap[i]
-                    # Where the leader's back would stop if it braked now at 4 m/s^2.
-                    and sf + leader_gap[i] + margin + leader_speed[i] ** 2 / 8.0 - s_exit
-                    < act.length_m + act.min_gap_m + margin
-                    and self._can_stop(act, abs(speeds[i]), gap)
-                ):
-                    # Keep the junction clear: no room for this vehicle behind
-                    # its leader on the far side, so wait at the line.
-                    stop_gap[i] = gap
-                elif (
-                    state != "G"
-                    and gap < YIELD_LOOKAHEAD_M
-                    and self._can_stop(act, abs(speeds[i]), gap)
-                    and self._must_yield(vid, via)
-                ):
-                    # A link without priority (green without priority, an
-                    # unsignalised minor road): wait at the line while SUMO
-                    # reports foes approaching it, unless it is too late to
-                    # stop before the line (then stopping would block the
-                    # junction: clear it instead).
-                    stop_gap[i] = gap
-            # End of the route: a standing obstacle a little past the last lane's end,
-            # so the vehicle slows down and SUMO sees it arrive. A track that stops
-            # where a lane change is due ends LANE_CHANGE_ROOM_M early instead:
-            # the vehicle waits there for a gap, with room left to change.
-            if geo.pending_change is not None:
-                end_gap = geo.length_m - LANE_CHANGE_ROOM_M - sf - margin if sf == sf else math.nan
-            else:
-                end_gap = geo.length_m + 5.0 - sf if sf == sf else math.nan
-            if end_gap == end_gap and end_gap < 200.0:
-                stop_gap[i] = end_gap if not stop_gap[i] == stop_gap[i] else min(stop_gap[i], end_gap)
-        # After the loop: a lane change above may have moved a vehicle to a new slot.
-        slots = np.fromiter((a.slot for a in acts), dtype=np.int64, count=n)
-        out = self.fleet.step(
-            slots,
-            st[:, 0],
-            st[:, 1],
-            st[:, 2],
-            st[:, 3],
-            st[:, 4],
-            leader_gap=leader_gap,
-            leader_speed=leader_speed,
-            stop_gap=stop_gap,
-            speed_limit=limit,
-            dt=self.dt,
-        )
-        # Python lists: indexing them is several times cheaper than numpy scalars.
-        ok = out["ok"].tolist()
-        nx, ny, nth, nv, nd = (out[k].tolist() for k in ("x_m", "y_m", "theta_rad", "v_mps", "delta_rad"))
-        e = out["lateral_error_m"].tolist()
-        eth = out["heading_error_rad"].tolist()
-        s_rear = out["s_rear_m"].tolist()
-        kappa = out["curvature_per_m"].tolist()
-        v_obs = out["virtual_obstacle_m"].tolist()
-        limits = limit.tolist()
-        s_fronts = s_front.tolist()
-        trace = self.opt.trace
-        move = sumo.vehicle.moveToXY
-        move_to = sumo.vehicle.moveTo
-        set_speed = sumo.vehicle.setSpeed
-        dt = self.dt
-        for i, (vid, act) in enumerate(zip(ids, acts)):
-            rec = act.record
-            if not ok[i]:
-                # Unusable state (NaN): hand the vehicle back rather than move it anywhere.
-                self._drop(vid, t, "invalid_state")
-                continue
-            x, y, th, v, d = nx[i], ny[i], nth[i], nv[i], nd[i]
-            reach = act.wheelbase_m + act.front_overhang_m
-            xf, yf = x + reach * math.cos(th), y + reach * math.sin(th)
-            sf_new = s_rear[i] + reach
-            geo = act.geo
-            k = geo.piece_index_at(sf_new)
-            edge, lane_index, lane_id = geo.piece_edge[k], geo.piece_index[k], geo.piece_lane[k]
-            try:
-                # The cheap call carries the same pose when the vehicle is on its
-                # lane's centreline (SPEC §7): moveTo places it BEFORE SUMO's own
-                # movement, so aim v dt short and let setSpeed(v) cover the rest.
-                pos = (sf_new - geo.starts[k]) * geo.scales[k] - v * dt
-                if k == len(geo.piece_lane) - 1 and geo.pending_change is None and sf_new > geo.length_m - 2.0 * v * dt - 2.0:
-                    # About to arrive: a deferred (x, y) move would be applied
-                    # after SUMO removed the vehicle. Let SUMO carry it to the end.
-                    set_speed(vid, v)
-                    self.cheap_moves += 1
-                # Only when the whole vehicle is on that lane: SUMO keeps a
-                # vehicle's back on the lanes behind it (its "further lanes")
-                # through (x, y) moves, and a lane-position move would drop them.
-                elif geo.plains[k] and pos >= act.length_m and abs(e[i]) < CHEAP_LATERAL_M and abs(eth[i]) < CHEAP_HEADING_RAD and v >= 0.0:
-                    # Our arc length and SUMO's lane position can differ by a
-                    # few cm (smoothed geometry, earlier (x, y) moves): never
-                    # move a vehicle backwards into its follower's minGap.
-                    sub = subs[vid]
-                    if sub.get(tc.VAR_LANE_ID) == lane_id:
-                        pos = max(pos, float(sub.get(tc.VAR_LANEPOSITION, pos)))
-                    move_to(vid, lane_id, pos)
-                    set_speed(vid, v)
-                    self.cheap_moves += 1
+                gaps.append(gap)
+                other = active.get(lid)
+                if other is not None:
+                    lslots.append(other.slot)
+                    lspeeds.append(nan)
                 else:
-                    angle = math.degrees(math.pi / 2.0 - th) % 360.0
-                    move(vid, edge, lane_index, xf, yf, angle, 3)
-                    # Without it SUMO keeps reporting the last setSpeed value,
-                    # and followers plan with a wrong leader speed.
-                    set_speed(vid, v)
-                    self.xy_moves += 1
+                    lslots.append(-1)
+                    lspeeds.append(v.getSpeed(lid))
+            else:
+                gaps.append(nan)
+                lslots.append(-1)
+                lspeeds.append(nan)
+        return ids, acts, [gaps, lslots, lspeeds, lanes, poss]
+
+    def _changing_leader(self, act: _Active, lead: Any) -> Any:
+        """During a lane change SUMO reports the leader on the lane the vehicle
+        is still on; the one on the target lane matters as much. Returns the
+        closer of the two (or the one there is)."""
+        v = self.sumo.vehicle
+        direction, target = act.changing  # type: ignore[misc]
+        if v.getLaneIndex(act.vid) == target:
+            act.changing = None
+            return lead
+        # getNeighbors mode: bit 0 right (1) / left (0), bit 1 leaders (2).
+        for nid, gap in v.getNeighbors(act.vid, 2 | (1 if direction < 0 else 0)):
+            if not (lead and lead[0] and lead[1] >= -100.0) or gap < lead[1]:
+                lead = (nid, gap)
+        return lead
+
+    def _control_step(self, t: float, comfort: float) -> None:
+        del comfort  # the RouteFleet applies the scenario's (given at construction)
+        self._steps += 1
+        for vid, lane, pos, speed in self._lane_change_due:
+            act = self.active.get(vid)
+            if act is not None:
+                self._try_lane_change(act, self._lanes.name(lane), pos, speed)
+        self._lane_change_due = []
+        if self._has_tls:
+            self._refresh_tls()
+        ids, acts, obs = self._observe(t)
+        if not ids:
+            return
+        fleet = self.fleet
+        slots = [a.slot for a in acts]
+        queries = fleet.plan(slots, *obs).tolist()
+        answers = [self._must_yield(ids[i], acts[i].slot) for i in queries]
+        out = fleet.step(np.array(answers, dtype=bool), self.dt)
+        self._apply(t, ids, acts, out)
+
+    def _apply(self, t: float, ids: list[str], acts: list[_Active], out: dict[str, np.ndarray]) -> None:
+        """Pushes the new poses to SUMO, by the move RouteFleet chose for each."""
+        v = self.sumo.vehicle
+        moves = out["move"]
+        speeds = out["v_mps"]
+        failed: list[int] = []
+        lane_names = self._lanes.names
+        idx = np.flatnonzero(moves == _LANE)
+        move_to, set_speed = v.moveTo, v.setSpeed
+        for i, lane, pos, sp in zip(idx.tolist(), out["lane"][idx].tolist(), out["lane_pos_m"][idx].tolist(), speeds[idx].tolist()):
+            try:
+                move_to(ids[i], lane_names[lane], pos)
+                set_speed(ids[i], sp)
             except Exception:
-                self.counts["vanished"] += 1
-                self._drop(vid, t, "vanished")
-                continue
-            # Red-light crossing: the front passed a stop line whose light is red.
-            old_sf = s_fronts[i]
-            if act.next_stop < len(act.geo.stops) and old_sf == old_sf:
-                s_stop, tls, link = act.geo.stops[act.next_stop][:3]
-                if tls and old_sf < s_stop <= sf_new and self._tls_char(tls, link) in "rR":
-                    rec.red_light_violations += 1
-                    self.violations.append((t, vid, tls, link, old_sf, sf_new, s_stop))
-            self._s_front[vid] = sf_new
-            prev_v = self._state[vid][3]
-            self._state[vid] = (x, y, th, v, d)
-            acc = (v - prev_v) / dt
-            lat_acc = v * v * math.tan(d) / act.wheelbase_m
-            ae = abs(e[i])
-            rec.steps += 1
-            rec.sum_abs_e += ae
-            rec.sum_e2 += ae * ae
-            if ae > rec.max_abs_e:
-                rec.max_abs_e = ae
-            rec.sum_eth2 += eth[i] * eth[i]
-            rec.sum_v += abs(v)
-            rec.distance_m += abs(v) * dt
-            if abs(lat_acc) > rec.max_lat_acc:
-                rec.max_lat_acc = abs(lat_acc)
-            if abs(lat_acc) > comfort:
-                rec.time_above_comfort_s += dt
-            if rec.last_acc == rec.last_acc:
-                jerk = (acc - rec.last_acc) / dt
-                rec.sum_jerk2 += jerk * jerk
-                rec.jerk_n += 1
-            rec.last_acc = acc
-            if abs(v) > limits[i] * 1.0001:
-                rec.speed_warnings += 1
-            if v < 0.0:
-                rec.reverse_warnings += 1
-            if rec.steps % 10 == 0:
-                self._samples.append((abs(kappa[i]), abs(v), ae, abs(lat_acc)))
-            if act.trajectory is not None:
-                act.trajectory.append((t, xf, yf, v, e[i], kappa[i]))
-            if trace:
-                self._trace_rows.append((t, vid, x, y, th, v, d, e[i], eth[i], s_rear[i], kappa[i], acc, v_obs[i], edge, lane_index))
+                failed.append(i)
+        self.cheap_moves += len(idx)
+        idx = np.flatnonzero(moves == _XY)
+        move, edge_names = v.moveToXY, self._edges.names
+        cols = (out[k][idx].tolist() for k in ("edge", "lane_index", "x_front_m", "y_front_m", "angle_deg"))
+        for i, edge, lane_index, xf, yf, angle, sp in zip(idx.tolist(), *cols, speeds[idx].tolist()):
+            try:
+                move(ids[i], edge_names[edge], lane_index, xf, yf, angle, 3)
+                # Without it SUMO keeps reporting the last setSpeed value,
+                # and followers plan with a wrong leader speed.
+                set_speed(ids[i], sp)
+            except Exception:
+                failed.append(i)
+        self.xy_moves += len(idx)
+        idx = np.flatnonzero(moves == _SPEED)
+        for i, sp in zip(idx.tolist(), speeds[idx].tolist()):
+            # About to arrive: let SUMO carry it to the end of its route.
+            try:
+                set_speed(ids[i], sp)
+            except Exception:
+                failed.append(i)
+        self.cheap_moves += len(idx)
+        for i in np.flatnonzero(moves == _INVALID).tolist():
+            # Unusable state (NaN): hand the vehicle back rather than move it anywhere.
+            self._drop(ids[i], t, "invalid_state")
+        for i in failed:
+            self._move_failed(ids[i], acts[i], t)
+        read = out["read_position"]
+        self._read_position = {ids[i] for i in np.flatnonzero(read).tolist()}
+        for i in np.flatnonzero(out["red_light"]).tolist():
+            stop = self.fleet.next_stop(acts[i].slot)
+            light = self._lights.name(stop[1]) if stop is not None and stop[1] >= 0 else ""
+            self.violations.append((t, ids[i], light, stop[2] if stop else -1, stop[0] if stop else math.nan))
+        due = np.flatnonzero(out["lane_change_due"]).tolist()
+        if due:
+            lane, pos, dt = out["lane"], out["lane_pos_m"], self.dt
+            # Where SUMO will have the front after its movement over the step.
+            self._lane_change_due = [(ids[i], int(lane[i]), float(pos[i] + speeds[i] * dt), float(speeds[i])) for i in due]
+        keep = [i for i, a in enumerate(acts) if a.trajectory is not None and a.vid in self.active]
+        if keep:
+            cols = [out[k] for k in ("x_front_m", "y_front_m", "v_mps", "lateral_error_m", "curvature_per_m")]
+            for i in keep:
+                acts[i].trajectory.append((t, *(float(c[i]) for c in cols)))  # type: ignore[union-attr]
+        if self.opt.trace:
+            self._trace(t, ids, acts, out)
 
-    def _can_stop(self, act: _Active, v: float, gap: float) -> bool:
-        c = act.config
-        a = blendtrack.stopping_accel(v, gap, 0.0, c.preferred_stop_dist, c.reaction_time, c.max_deceleration, c.max_obs_deceleration)
-        return a >= c.max_deceleration
+    def _trace(self, t: float, ids: list[str], acts: list[_Active], out: dict[str, np.ndarray]) -> None:
+        keys = ("x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "lateral_error_m", "heading_error_rad", "s_rear_m", "curvature_per_m", "accel_mps2", "virtual_obstacle_m")
+        edge_names = self._edges.names
+        cols = [out[k].tolist() for k in keys]
+        edges = [edge_names[e] for e in out["edge"].tolist()]
+        for row in zip(ids, *cols, edges, out["lane_index"].tolist()):
+            self._trace_rows.append((t, *row))
 
-    def _try_lane_change(self, act: _Active, sub: dict[int, Any], speed: float) -> None:
+    def _move_failed(self, vid: str, act: _Active, t: float) -> None:
+        """SUMO rejected a move: a new route (rerouted since the last check)
+        gets a new track; a vehicle that is gone is dropped."""
+        try:
+            rerouted = self.sumo.vehicle.getRouteID(vid) != act.route_id
+        except Exception:
+            rerouted = False
+        if rerouted:
+            self._rebuild(act)
+            return
+        self.counts["vanished"] += 1
+        self._drop(vid, t, "vanished")
+
+    def _try_lane_change(self, act: _Active, lane_id: str, pos: float, speed: float) -> None:
         """A lane change is due on this edge: make it once SUMO's lane-change
         model says the target lane has room (``couldChangeLane``)."""
-        tc = self._tc
         geo = act.geo
-        k_edge, target = geo.pending_change  # type: ignore[misc]
-        edge = geo.edges[k_edge]
-        lane_id = sub.get(tc.VAR_LANE_ID, "")
-        if not lane_id or lane_id.rsplit("_", 1)[0] != edge:
+        if geo.pending_change is None:
             return
-        current = int(lane_id.rsplit("_", 1)[1])
-        if current == target:
+        k_edge, target = geo.pending_change
+        edge, _, index = lane_id.rpartition("_")
+        if edge != geo.edges[k_edge] or not index.isdigit() or int(index) == target:
             return
+        current = int(index)
         direction = 1 if target > current else -1
         if not self.sumo.vehicle.couldChangeLane(act.vid, direction):
             return
-        pos = float(sub.get(tc.VAR_LANEPOSITION, 0.0))
         lane_length = float(self._net_geometry().getLane(lane_id).getLength())
         length = min(max(2.0 * abs(speed), 10.0), 30.0, lane_length - pos - 1.0)
         if length < 8.0:
             return
-        geo2, track, path = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
-        cfg = self.fleet.vehicle_config(act.slot)
-        veh = self.fleet.vehicle_params(act.slot)
-        self.fleet.remove_vehicle(act.slot)
-        act.slot = self.fleet.add_vehicle(track, cfg, veh)
+        geo2, track = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
+        self.fleet.retrack(act.slot, track)
         act.geo = geo2
-        act.next_stop = 0
+        act.changing = (direction, target)
         act.record.lane_changes += 1
-        x, y, th = self._state[act.vid][:3]
-        reach = act.wheelbase_m + act.front_overhang_m
-        self._s_front[act.vid] = float(path.project(x + reach * math.cos(th), y + reach * math.sin(th))["s_m"])
 
-    def _must_yield(self, vid: str, via: str) -> bool:
+    def _must_yield(self, vid: str, slot: int) -> bool:
         """SUMO's view of the link ahead: does it lack priority with foes approaching?"""
+        stop = self.fleet.next_stop(slot)
+        if stop is None:
+            return False
+        via = self._lanes.name(stop[4])
         for link in self.sumo.vehicle.getNextLinks(vid):
             # (lane, has priority, is open, has foe, via lane, state, direction, length)
             if link[4] == via:
                 return (not link[1]) and bool(link[3])
         return False
 
-    def _tls_char(self, tls: str, link: int) -> str:
-        st = self._tls_state.get(tls, "")
-        return st[link] if 0 <= link < len(st) else "G"
-
     def _refresh_tls(self) -> None:
         tc = self._tc
+        light = self._lights.id
+        set_signal = self.fleet.set_signal
         for tls, res in self.sumo.trafficlight.getAllSubscriptionResults().items():
-            self._tls_state[tls] = res.get(tc.TL_RED_YELLOW_GREEN_STATE, "")
+            state = res.get(tc.TL_RED_YELLOW_GREEN_STATE, "")
+            if self._tls_state.get(tls) != state:
+                self._tls_state[tls] = state
+                set_signal(light(tls), state)
 
     def _rebuild(self, act: _Active) -> None:
-        """The route changed (rerouting): rebuild the track from where the vehicle is."""
+        """The route changed (rerouting): a new track from where the vehicle is."""
         v = self.sumo.vehicle
         route = tuple(v.getRoute(act.vid))
         idx = max(int(v.getRouteIndex(act.vid)), 0)
-        geo, track, path = self._geometry(route[idx:], max(int(v.getLaneIndex(act.vid)), 0))
-        cfg = self.fleet.vehicle_config(act.slot)
-        veh = self.fleet.vehicle_params(act.slot)
-        self.fleet.remove_vehicle(act.slot)
-        act.slot = self.fleet.add_vehicle(track, cfg, veh)
+        geo, track = self._geometry(route[idx:], max(int(v.getLaneIndex(act.vid)), 0))
+        self.fleet.retrack(act.slot, track)
         act.geo = geo
-        act.next_stop = 0
+        act.changing = None
         act.route_id = v.getRouteID(act.vid)
-        x, y = v.getPosition(act.vid)
-        self._s_front[act.vid] = float(path.project(x, y)["s_m"])
+        self.counts["reroutes"] += 1
 
     def write_trace(self, file: Path) -> None:
         import csv
@@ -916,6 +887,27 @@ class SumoRun:
             w = csv.writer(f)
             w.writerow(["t_s", "id", "x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "lateral_error_m", "heading_error_rad", "s_m", "curvature_per_m", "accel_mps2", "virtual_obstacle_m", "edge", "lane_index"])
             w.writerows(self._trace_rows)
+
+
+class _Interned:
+    """String ids as small integers (RouteFleet takes integers), both ways."""
+
+    def __init__(self) -> None:
+        self.ids: dict[str, int] = {}
+        self.names: list[str] = []
+
+    def id(self, name: str) -> int:
+        i = self.ids.get(name)
+        if i is None:
+            i = self.ids[name] = len(self.names)
+            self.names.append(name)
+        return i
+
+    def get(self, name: str, default: int) -> int:
+        return self.ids.get(name, default)
+
+    def name(self, i: int) -> str:
+        return self.names[i]
 
 
 def _parse_like(raw: str, current: Any) -> Any:

@@ -22,6 +22,7 @@ mod errors;
 mod fleet;
 mod path;
 mod sim;
+mod traffic;
 
 /// The native module. Each submodule of this crate adds its own names
 /// through a `register` function, so this stays a list of one-liners.
@@ -37,5 +38,6 @@ fn _blendtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sim::compute_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(sim::stopping_accel, m)?)?;
     m.add_class::<fleet::Fleet>()?;
+    m.add_class::<traffic::RouteFleet>()?;
     Ok(())
 }

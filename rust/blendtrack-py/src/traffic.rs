@@ -1,0 +1,460 @@
+//! `RouteFleet` for Python: the core's route-driving batch stepper
+//! (`blendtrack::traffic`), which the SUMO plugin calls twice per simulation
+//! step (`plan`, then `step`) for all controlled vehicles at once.
+//!
+//! Lanes, edges, junction lanes and traffic lights are integers the caller
+//! interns; traffic-light states are SUMO state strings (`"rrGGy..."`).
+//! Errors: bad arguments raise `InputError` naming the argument or slot; a
+//! bad controller configuration raises `ConfigError`.
+
+use crate::config::{ControllerConfig, VehicleParams};
+use crate::errors::{config_error, fleet_error, input_error};
+use crate::path::Path;
+use blendtrack::traffic::{
+    Body, LaneChangeDue, Move, Observations, Piece, Route, RouteFleet as CoreRouteFleet, Signal,
+    StopLine, TrafficError, TrafficSettings,
+};
+use blendtrack::VehicleState;
+use numpy::ndarray::Array2;
+use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+type F64In<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
+type I64In<'py> = PyArrayLike1<'py, i64, AllowTypeChange>;
+
+fn traffic_error(e: TrafficError) -> PyErr {
+    match e {
+        TrafficError::Fleet(e) => fleet_error(e),
+        other => input_error(other.to_string()),
+    }
+}
+
+fn vec_of<T: numpy::Element + Copy>(a: &PyArrayLike1<'_, T, AllowTypeChange>) -> Vec<T> {
+    a.as_array().to_vec()
+}
+
+fn same_len(name: &str, expected: usize, got: usize) -> PyResult<()> {
+    if expected == got {
+        Ok(())
+    } else {
+        Err(input_error(format!(
+            "argument `{name}` has {got} entries, expected {expected}"
+        )))
+    }
+}
+
+fn u32_of(name: &str, i: usize, x: i64) -> PyResult<u32> {
+    u32::try_from(x).map_err(|_| input_error(format!("{name}[{i}] = {x}: must be in [0, 2^32)")))
+}
+
+fn stats_dict<'py>(
+    py: Python<'py>,
+    s: &blendtrack::traffic::DriveStats,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("steps", s.steps)?;
+    d.set_item("sum_abs_e", s.sum_abs_e)?;
+    d.set_item("sum_e2", s.sum_e2)?;
+    d.set_item("max_abs_e", s.max_abs_e)?;
+    d.set_item("sum_eth2", s.sum_eth2)?;
+    d.set_item("sum_v", s.sum_v)?;
+    d.set_item("distance_m", s.distance_m)?;
+    d.set_item("max_lat_acc", s.max_lat_acc)?;
+    d.set_item("time_above_comfort_s", s.time_above_comfort_s)?;
+    d.set_item("sum_jerk2", s.sum_jerk2)?;
+    d.set_item("jerk_n", s.jerk_n)?;
+    d.set_item("last_acc", s.last_acc)?;
+    d.set_item("speed_warnings", s.speed_warnings)?;
+    d.set_item("reverse_warnings", s.reverse_warnings)?;
+    d.set_item("red_light_violations", s.red_light_violations)?;
+    Ok(d)
+}
+
+/// Vehicles driving road routes among other traffic, stepped together.
+///
+/// Per simulation step: `plan(...)` with the leaders the simulator reports
+/// returns the indices of the vehicles that must ask the simulator whether to
+/// give way; `step(answers, dt)` runs the controllers and bicycle models and
+/// returns how to put each new pose into the simulator (`move`: 0 speed only,
+/// 1 lane + position, 2 x/y/angle, 3 invalid: hand the vehicle back).
+#[pyclass(module = "blendtrack")]
+pub struct RouteFleet {
+    inner: CoreRouteFleet,
+}
+
+#[pymethods]
+impl RouteFleet {
+    #[new]
+    #[pyo3(signature = (*, standstill_margin_m = 1.0, yield_lookahead_m = 30.0, lane_change_room_m = 15.0, route_end_extra_m = 5.0, route_end_horizon_m = 200.0, lane_move_lateral_m = 0.15, lane_move_heading_deg = 2.0, comfort_lateral_accel_mps2 = 2.0, sample_every = 10))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        standstill_margin_m: f64,
+        yield_lookahead_m: f64,
+        lane_change_room_m: f64,
+        route_end_extra_m: f64,
+        route_end_horizon_m: f64,
+        lane_move_lateral_m: f64,
+        lane_move_heading_deg: f64,
+        comfort_lateral_accel_mps2: f64,
+        sample_every: u64,
+    ) -> PyResult<Self> {
+        let inner = CoreRouteFleet::new(TrafficSettings {
+            standstill_margin_m,
+            yield_lookahead_m,
+            lane_change_room_m,
+            route_end_extra_m,
+            route_end_horizon_m,
+            lane_move_lateral_m,
+            lane_move_heading_rad: lane_move_heading_deg.to_radians(),
+            comfort_lateral_accel_mps2,
+            sample_every,
+        })
+        .map_err(|e| match e {
+            TrafficError::Parameter {
+                name,
+                value,
+                message,
+            } => config_error(blendtrack::ConfigError::Invalid {
+                key: name.into(),
+                value: value.to_string(),
+                message: message.into(),
+            }),
+            other => traffic_error(other),
+        })?;
+        Ok(RouteFleet { inner })
+    }
+
+    /// Registers a track with its lane pieces and stop lines; returns its id.
+    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_plain, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, lane_change = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_route(
+        &mut self,
+        py: Python<'_>,
+        path: &Path,
+        config: Option<ControllerConfig>,
+        piece_start_m: F64In<'_>,
+        piece_scale: F64In<'_>,
+        piece_plain: I64In<'_>,
+        piece_speed_mps: F64In<'_>,
+        piece_lane: I64In<'_>,
+        piece_edge: I64In<'_>,
+        piece_lane_index: I64In<'_>,
+        length_m: f64,
+        stop_s_m: Option<F64In<'_>>,
+        stop_light: Option<I64In<'_>>,
+        stop_link: Option<I64In<'_>>,
+        stop_major: Option<I64In<'_>>,
+        stop_via: Option<I64In<'_>>,
+        stop_exit_m: Option<F64In<'_>>,
+        lane_change: Option<(i64, i64)>,
+    ) -> PyResult<usize> {
+        let starts = vec_of(&piece_start_m);
+        let n = starts.len();
+        let scale = vec_of(&piece_scale);
+        let plain = vec_of(&piece_plain);
+        let speed = vec_of(&piece_speed_mps);
+        let lane = vec_of(&piece_lane);
+        let edge = vec_of(&piece_edge);
+        let index = vec_of(&piece_lane_index);
+        for (name, got) in [
+            ("piece_scale", scale.len()),
+            ("piece_plain", plain.len()),
+            ("piece_speed_mps", speed.len()),
+            ("piece_lane", lane.len()),
+            ("piece_edge", edge.len()),
+            ("piece_lane_index", index.len()),
+        ] {
+            same_len(name, n, got)?;
+        }
+        let mut pieces = Vec::with_capacity(n);
+        for i in 0..n {
+            pieces.push(Piece {
+                start_m: starts[i],
+                scale: scale[i],
+                plain: plain[i] != 0,
+                speed_mps: speed[i],
+                lane: u32_of("piece_lane", i, lane[i])?,
+                edge: u32_of("piece_edge", i, edge[i])?,
+                lane_index: u32_of("piece_lane_index", i, index[i])?,
+            });
+        }
+        let s = stop_s_m.as_ref().map(vec_of).unwrap_or_default();
+        let m = s.len();
+        let col_i = |c: &Option<I64In<'_>>, default: i64| {
+            c.as_ref().map(vec_of).unwrap_or_else(|| vec![default; m])
+        };
+        let light = col_i(&stop_light, -1);
+        let link = col_i(&stop_link, 0);
+        let major = col_i(&stop_major, 0);
+        let via = col_i(&stop_via, 0);
+        let exit = stop_exit_m
+            .as_ref()
+            .map(vec_of)
+            .unwrap_or_else(|| vec![f64::INFINITY; m]);
+        for (name, got) in [
+            ("stop_light", light.len()),
+            ("stop_link", link.len()),
+            ("stop_major", major.len()),
+            ("stop_via", via.len()),
+            ("stop_exit_m", exit.len()),
+        ] {
+            same_len(name, m, got)?;
+        }
+        let mut stops = Vec::with_capacity(m);
+        for i in 0..m {
+            let signal = if light[i] >= 0 {
+                Some((light[i] as usize, u32_of("stop_link", i, link[i])? as usize))
+            } else {
+                None
+            };
+            stops.push(StopLine {
+                s_m: s[i],
+                signal,
+                major: major[i] != 0,
+                via: u32_of("stop_via", i, via[i])?,
+                exit_m: exit[i],
+            });
+        }
+        let lane_change = match lane_change {
+            Some((e, t)) => Some(LaneChangeDue {
+                edge: u32_of("lane_change edge", 0, e)?,
+                target_index: u32_of("lane_change target", 1, t)?,
+            }),
+            None => None,
+        };
+        let route = Route::new(pieces, stops, length_m, lane_change).map_err(traffic_error)?;
+        let cfg = config.map(|c| c.to_core()).transpose()?.unwrap_or_default();
+        let p = path.inner.clone();
+        let inner = &mut self.inner;
+        py.detach(|| inner.add_route(p, cfg, route))
+            .map_err(traffic_error)
+    }
+
+    /// Adds a vehicle (rear-axle state) on a track; returns its slot.
+    #[pyo3(signature = (track_id, config, vehicle, *, reach_m, length_m, min_gap_m, x, y, theta, v, delta = 0.0))]
+    #[allow(clippy::too_many_arguments)]
+    fn add_vehicle(
+        &mut self,
+        track_id: i64,
+        config: Option<ControllerConfig>,
+        vehicle: Option<VehicleParams>,
+        reach_m: f64,
+        length_m: f64,
+        min_gap_m: f64,
+        x: f64,
+        y: f64,
+        theta: f64,
+        v: f64,
+        delta: f64,
+    ) -> PyResult<usize> {
+        let cfg = config.map(|c| c.to_core()).transpose()?;
+        let params = vehicle.map(|v| v.to_core()).transpose()?;
+        let body = Body {
+            reach_m,
+            length_m,
+            min_gap_m,
+        };
+        let state = VehicleState {
+            x_m: x,
+            y_m: y,
+            theta_rad: theta,
+            v_mps: v,
+            delta_rad: delta,
+        };
+        self.inner
+            .add_vehicle(track_id, cfg, params, body, state)
+            .map_err(traffic_error)
+    }
+
+    /// Moves a vehicle to another track; its state and statistics stay.
+    fn retrack(&mut self, slot: i64, track_id: i64) -> PyResult<()> {
+        self.inner.retrack(slot, track_id).map_err(traffic_error)
+    }
+
+    /// Frees a slot; returns the vehicle's statistics (a dict).
+    fn remove_vehicle<'py>(&mut self, py: Python<'py>, slot: i64) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.inner.remove_vehicle(slot).map_err(traffic_error)?;
+        stats_dict(py, &s)
+    }
+
+    /// The vehicle's statistics so far (a dict).
+    fn stats<'py>(&self, py: Python<'py>, slot: i64) -> PyResult<Bound<'py, PyDict>> {
+        let s = self.inner.stats(slot).map_err(traffic_error)?;
+        stats_dict(py, &s)
+    }
+
+    /// (x, y, theta, v, delta) of the vehicle's rear axle.
+    fn state(&self, slot: i64) -> PyResult<(f64, f64, f64, f64, f64)> {
+        let s = self.inner.state(slot).map_err(traffic_error)?;
+        Ok((s.x_m, s.y_m, s.theta_rad, s.v_mps, s.delta_rad))
+    }
+
+    /// Arc length of the vehicle's front bumper on its track (m).
+    fn s_front(&self, slot: i64) -> PyResult<f64> {
+        self.inner.s_front(slot).map_err(traffic_error)
+    }
+
+    /// The stop line ahead of the vehicle as (s_m, light, link, major, via,
+    /// exit_m), light = -1 when unsignalised; None past the last one.
+    #[allow(clippy::type_complexity)]
+    fn next_stop(&self, slot: i64) -> PyResult<Option<(f64, i64, i64, bool, i64, f64)>> {
+        let s = self.inner.next_stop(slot).map_err(traffic_error)?;
+        Ok(s.map(|s| {
+            let (light, link) = s.signal.map_or((-1, 0), |(l, k)| (l as i64, k as i64));
+            (s.s_m, light, link, s.major, i64::from(s.via), s.exit_m)
+        }))
+    }
+
+    fn vehicle_config(&self, slot: i64) -> PyResult<ControllerConfig> {
+        self.inner
+            .vehicle_config(slot)
+            .map(ControllerConfig::from)
+            .map_err(traffic_error)
+    }
+
+    fn vehicle_params(&self, slot: i64) -> PyResult<VehicleParams> {
+        self.inner
+            .vehicle_params(slot)
+            .map(VehicleParams::from)
+            .map_err(traffic_error)
+    }
+
+    fn vehicle_track(&self, slot: i64) -> PyResult<usize> {
+        self.inner.fleet().vehicle_track(slot).map_err(fleet_error)
+    }
+
+    /// Sets a light's state from its SUMO state string (one character per
+    /// link). Lights are numbered from 0 in the order first set.
+    fn set_signal(&mut self, light: usize, state: &str) -> PyResult<()> {
+        let links: Vec<Signal> = state.bytes().map(Signal::from_sumo).collect();
+        self.inner.set_signal(light, &links).map_err(traffic_error)
+    }
+
+    /// First half of a step. `leader_gap` (NaN: none), `leader_slot` (< 0:
+    /// not driven here), `leader_speed` (used when not driven here), and the
+    /// simulator's `lane` (< 0: not read) and `lane_pos` of each vehicle.
+    /// Returns the indices into `slots` of the vehicles that must ask the
+    /// simulator whether to give way.
+    #[allow(clippy::too_many_arguments)]
+    fn plan<'py>(
+        &mut self,
+        py: Python<'py>,
+        slots: I64In<'py>,
+        leader_gap: F64In<'py>,
+        leader_slot: I64In<'py>,
+        leader_speed: F64In<'py>,
+        lane: I64In<'py>,
+        lane_pos: F64In<'py>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let (sl, lg, ls, lv, ln, lp) = (
+            vec_of(&slots),
+            vec_of(&leader_gap),
+            vec_of(&leader_slot),
+            vec_of(&leader_speed),
+            vec_of(&lane),
+            vec_of(&lane_pos),
+        );
+        let obs = Observations {
+            slots: &sl,
+            leader_gap_m: &lg,
+            leader_slot: &ls,
+            leader_speed_mps: &lv,
+            lane: &ln,
+            lane_pos_m: &lp,
+        };
+        let inner = &mut self.inner;
+        let q = py.detach(|| inner.plan(&obs)).map_err(traffic_error)?;
+        Ok(q.into_iter()
+            .map(|i| i as i64)
+            .collect::<Vec<_>>()
+            .into_pyarray(py))
+    }
+
+    /// Second half of a step: `must_yield[j]` answers the j-th index `plan`
+    /// returned. Returns a dict of arrays in the plan's order (see the class docs).
+    fn step<'py>(
+        &mut self,
+        py: Python<'py>,
+        must_yield: PyArrayLike1<'py, bool, AllowTypeChange>,
+        dt: f64,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let answers = vec_of(&must_yield);
+        let inner = &mut self.inner;
+        let r = py
+            .detach(|| inner.step(&answers, dt))
+            .map_err(traffic_error)?;
+        let d = PyDict::new(py);
+        let moves: Vec<u8> = r.moves.iter().map(|m| *m as u8).collect();
+        d.set_item("move", moves.into_pyarray(py))?;
+        let ints = |v: Vec<u32>| v.into_iter().map(i64::from).collect::<Vec<i64>>();
+        d.set_item("lane", ints(r.lane).into_pyarray(py))?;
+        d.set_item("edge", ints(r.edge).into_pyarray(py))?;
+        d.set_item("lane_index", ints(r.lane_index).into_pyarray(py))?;
+        for (k, col) in [
+            ("lane_pos_m", r.lane_pos_m),
+            ("x_front_m", r.x_front_m),
+            ("y_front_m", r.y_front_m),
+            ("angle_deg", r.angle_deg),
+            ("x_m", r.x_m),
+            ("y_m", r.y_m),
+            ("theta_rad", r.theta_rad),
+            ("v_mps", r.v_mps),
+            ("delta_rad", r.delta_rad),
+            ("accel_mps2", r.accel_mps2),
+            ("lateral_error_m", r.lateral_error_m),
+            ("heading_error_rad", r.heading_error_rad),
+            ("s_rear_m", r.s_rear_m),
+            ("curvature_per_m", r.curvature_per_m),
+            ("virtual_obstacle_m", r.virtual_obstacle_m),
+        ] {
+            d.set_item(k, col.into_pyarray(py))?;
+        }
+        for (k, col) in [
+            ("red_light", r.red_light),
+            ("lane_change_due", r.lane_change_due),
+            ("read_position", r.read_position),
+        ] {
+            d.set_item(k, col.into_pyarray(py))?;
+        }
+        Ok(d)
+    }
+
+    /// The (|curvature|, |v|, |lateral error|, |lateral acceleration|)
+    /// samples kept since the last call, as an (N, 4) array.
+    fn take_samples<'py>(&mut self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        let s = self.inner.take_samples();
+        let flat: Vec<f64> = s.iter().flatten().copied().collect();
+        Array2::from_shape_vec((s.len(), 4), flat)
+            .expect("rows of 4")
+            .into_pyarray(py)
+    }
+
+    #[getter]
+    fn n_tracks(&self) -> usize {
+        self.inner.fleet().n_tracks()
+    }
+
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "RouteFleet(tracks={}, vehicles={})",
+            self.inner.fleet().n_tracks(),
+            self.inner.len()
+        )
+    }
+}
+
+#[allow(dead_code)]
+fn _move_codes_are_stable() {
+    // The Python side relies on these numbers.
+    const _: () = assert!(
+        Move::Speed as u8 == 0
+            && Move::Lane as u8 == 1
+            && Move::Xy as u8 == 2
+            && Move::Invalid as u8 == 3
+    );
+}

@@ -1,0 +1,92 @@
+"""RouteFleet (the SUMO plugin's engine) from Python: bad input is a clear
+error, never a crash, and the two-call step works as documented."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import blendtrack
+from blendtrack import RouteFleet
+
+
+def _fleet() -> tuple[RouteFleet, int]:
+    f = RouteFleet()
+    xs = np.arange(0.0, 301.0, 1.0)
+    path = blendtrack.Path(np.column_stack([xs, np.zeros_like(xs)]))
+    track = f.add_route(
+        path,
+        None,
+        piece_start_m=[0.0, 100.0],
+        piece_scale=[1.0, 1.0],
+        piece_plain=[1, 1],
+        piece_speed_mps=[15.0, 15.0],
+        piece_lane=[0, 1],
+        piece_edge=[0, 1],
+        piece_lane_index=[0, 0],
+        length_m=300.0,
+        stop_s_m=[100.0],
+        stop_light=[0],
+        stop_link=[0],
+        stop_major=[0],
+        stop_via=[2],
+        stop_exit_m=[100.0],
+    )
+    return f, track
+
+
+def _add(f: RouteFleet, track: int, x: float, v: float) -> int:
+    return f.add_vehicle(track, None, None, reach_m=3.5, length_m=4.5, min_gap_m=2.5, x=x, y=0.0, theta=0.0, v=v)
+
+
+def _step(f: RouteFleet, slots: list[int]) -> dict[str, np.ndarray]:
+    n = len(slots)
+    nan = [math.nan] * n
+    q = f.plan(slots, nan, [-1] * n, nan, [-1] * n, nan)
+    return f.step(np.zeros(len(q), dtype=bool), 0.1)
+
+
+def test_red_light_holds_the_vehicle_and_moves_are_lane_moves() -> None:
+    f, track = _fleet()
+    slot = _add(f, track, 40.0, 10.0)
+    f.set_signal(0, "r")
+    for _ in range(300):
+        out = _step(f, [slot])
+    assert out["move"][0] == 1 and out["lane"][0] == 0
+    assert 95.0 < f.s_front(slot) < 100.0
+    assert f.stats(slot)["red_light_violations"] == 0
+    f.set_signal(0, "G")
+    for _ in range(100):
+        _step(f, [slot])
+    assert f.s_front(slot) > 110.0
+    stats = f.remove_vehicle(slot)
+    assert stats["steps"] == 400 and len(f) == 0
+
+
+@pytest.mark.parametrize(
+    "call, match",
+    [
+        (lambda f, t, s: f.plan([s], [1.0, 2.0], [-1], [0.0], [-1], [0.0]), "leader_gap"),
+        (lambda f, t, s: f.plan([s + 7], [1.0], [-1], [0.0], [-1], [0.0]), "slot"),
+        (lambda f, t, s: f.step([], 0.1), "plan"),
+        (lambda f, t, s: f.retrack(s, 99), "track"),
+        (lambda f, t, s: _add(f, t, math.nan, 1.0), "finite"),
+        (lambda f, t, s: f.set_signal(1 << 21, "r"), "light"),
+        (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0, -1.0], piece_scale=[1.0, 1.0], piece_plain=[1, 1], piece_speed_mps=[1.0, 1.0], piece_lane=[0, 0], piece_edge=[0, 0], piece_lane_index=[0, 0], length_m=1.0), "piece 1"),
+        (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0], piece_scale=[1.0], piece_plain=[1], piece_speed_mps=[1.0], piece_lane=[-3], piece_edge=[0], piece_lane_index=[0], length_m=1.0), "piece_lane"),
+    ],
+)
+def test_bad_calls_raise_input_error_and_leave_the_fleet_usable(call, match) -> None:  # type: ignore[no-untyped-def]
+    f, track = _fleet()
+    slot = _add(f, track, 40.0, 10.0)
+    with pytest.raises(blendtrack.InputError, match=match):
+        call(f, track, slot)
+    out = _step(f, [slot])
+    assert out["move"][0] == 1 and len(f) == 1
+
+
+def test_bad_settings_are_config_errors() -> None:
+    with pytest.raises(blendtrack.ConfigError, match="comfort_lateral_accel_mps2"):
+        RouteFleet(comfort_lateral_accel_mps2=-1.0)
