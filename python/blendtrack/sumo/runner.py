@@ -250,7 +250,7 @@ class SumoRun:
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         self.cheap_moves = 0
         #: (time, vehicle, traffic light, link index, stop line arc length) of each red-light crossing.
@@ -552,7 +552,8 @@ class SumoRun:
             "step_length_s": self.dt,
             "controlled_vehicles": controlled,
             "background_vehicles": len(self._background),
-            "collisions": sum(r.collisions for r in self.records),
+            "collisions": self.counts["collision_events"],
+            "controlled_vehicles_in_collisions": sum(r.collisions for r in self.records),
             "teleports": sum(r.teleports for r in self.records),
             "red_light_violations": sum(r.red_light_violations for r in self.records),
             "vanished": self.counts["vanished"],
@@ -602,7 +603,14 @@ class SumoRun:
             for vid in ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ()):
                 if vid in self.active:
                     self._drop(vid, t, "teleport")
-            for vid in ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ()):
+            colliding = ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ())
+            if colliding:
+                # Events, not vehicles: one collision of two controlled
+                # vehicles is one event and two vehicle records.
+                for c in sumo.simulation.getCollisions():
+                    if c.collider in self.active or c.victim in self.active:
+                        self.counts["collision_events"] += 1
+            for vid in colliding:
                 if vid in self.active:
                     self._drop(vid, t, "collision")
             for vid in ev.get(tc.VAR_DEPARTED_VEHICLES_IDS, ()):
