@@ -101,6 +101,19 @@ def test_grid_stops_for_red_lights_and_follows_leaders(grid: tuple[Path, sumo.Ru
     assert rear_ends == [], rear_ends
 
 
+def test_grid_with_every_vehicle_controlled_has_no_junction_collision(tmp_path: Path) -> None:
+    """Left turns across oncoming lanes wait at the internal junction (SUMO does
+    not see vehicles moved by blendtrack approach it, so the check is ours),
+    and lane changes start only with room: before both, this run had 24
+    junction collisions in 300 s."""
+    sc = sumo.resolve_scenario("urban_grid")
+    result = sumo.run_scenario(sc, RunOptions(controlled_fraction=1.0, end_s=300, progress=False), tmp_path)
+    assert result.summary["controlled_vehicles"] > 300
+    assert _collisions(tmp_path) == []
+    assert result.summary["red_light_violations"] == 0
+    assert sum(r.reason == "arrived" for r in result.records) > 100, "traffic flows (no deadlock)"
+
+
 def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -> None:
     sc = sumo.resolve_scenario("urban_grid")
     run = SumoRun(sc, RunOptions(end_s=150, progress=False), tmp_path)
@@ -154,7 +167,8 @@ def test_rerouted_vehicle_gets_a_new_track_and_drives_on(tmp_path: Path) -> None
     assert result.summary["reroutes"] >= 1
     rec = {r.vid: r for r in result.records}[vid]
     assert rec.reason == "arrived", rec.reason
-    assert rec.collisions == 0 and rec.max_abs_e < 0.5, (rec.collisions, rec.max_abs_e)
+    # It tracked its new lanes (a lane change at the end of a queue peaks near 1 m).
+    assert rec.collisions == 0 and rec.sum_abs_e / rec.steps < 0.1, (rec.collisions, rec.sum_abs_e / rec.steps)
     # ... at the new destination.
     trips = {t.get("id"): t.attrib for t in ET.parse(tmp_path / "sumo" / "tripinfo.xml").getroot().iter("tripinfo")}
     assert trips[vid]["arrivalLane"].rsplit("_", 1)[0] == new_route[-1]

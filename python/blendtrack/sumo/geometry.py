@@ -65,7 +65,10 @@ class RouteGeometry:
     #: Junction entries along the track, sorted by arc length: (arc length of
     #: the stop line, traffic light id or "" when unsignalised, link index,
     #: True when the link has priority by the network (state "M"), the first
-    #: junction lane's id, arc length where the junction is left).
+    #: junction lane's id, arc length where the junction is left). An entry
+    #: with link index -1 is an internal junction: the waiting point inside
+    #: the junction of a turn across oncoming lanes (its lane is the junction
+    #: lane after that point).
     stops: list[tuple[float, str, int, bool, str, float]] = field(default_factory=list)
     #: Route edges this geometry was built for.
     edges: tuple[str, ...] = field(default_factory=tuple)
@@ -197,7 +200,7 @@ def _pieces(
                 no_change[k].add(ln.getID())
 
     def piece(lane: Any, shape: np.ndarray | None = None) -> _Piece:
-        plain = shape is None and not lane.getID().startswith(":")
+        plain = shape is None
         if shape is None:
             shape = _resample(np.asarray(lane.getShape(), dtype=float), spacing_m)
         return _Piece(
@@ -249,6 +252,10 @@ def _pieces(
         vias = [piece(v) for v in _via_chain(net, c)]
         if vias:
             vias[0].tls = (c.getTLSID() or "", int(c.getTLLinkIndex()), c.getState() == "M")
+        for v in vias[1:]:
+            # An internal junction (a left turn crossing the oncoming lanes):
+            # SUMO's drivers wait there for oncoming traffic, and so do ours.
+            v.tls = ("", -1, False)
         out.extend(vias)
         lane = c.getToLane()
     return out, None
@@ -314,8 +321,13 @@ def route_geometry(
         kept.append(pc)
         if pc.tls is not None:
             stops.append((end_of_previous, pc.tls[0], pc.tls[1], pc.tls[2], pc.lane, math.inf))
-        if stops and math.isinf(stops[-1][5]) and not pc.lane.startswith(":"):
-            stops[-1] = (*stops[-1][:5], s)
+        if not pc.lane.startswith(":"):
+            # The junction is left here: the exit of its entry and of its
+            # internal junction, if any.
+            for j in range(len(stops) - 1, -1, -1):
+                if not math.isinf(stops[j][5]):
+                    break
+                stops[j] = (*stops[j][:5], s)
         d = np.diff(shape, axis=0)
         seg = float(np.hypot(d[:, 0], d[:, 1]).sum())
         geo_len.append(seg)

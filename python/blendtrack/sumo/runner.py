@@ -70,11 +70,18 @@ CHEAP_LATERAL_M = 0.15
 CHEAP_HEADING_RAD = math.radians(2.0)
 # Room kept before the end of a lane that does not continue, to change lanes (m).
 LANE_CHANGE_ROOM_M = 15.0
+# A lane change starts only with this gap (m), plus what the closing speed
+# eats during the change, to the vehicles ahead and behind on the target lane.
+LANE_CHANGE_GAP_M = 5.0
 # How far before a junction without priority a vehicle asks SUMO whether foes approach (m).
 YIELD_LOOKAHEAD_M = 30.0
 # A controlled vehicle's route id is compared with SUMO's every this many steps
 # (rerouting is rare; a move SUMO rejects triggers the check at once).
 ROUTE_CHECK_EVERY = 10
+# At an internal junction (the waiting point of a turn across oncoming lanes)
+# a vehicle waits while a foe is this many seconds or metres from its stop line.
+INTERNAL_YIELD_S = 4.0
+INTERNAL_YIELD_NEAR_M = 5.0
 # RouteFleet move codes.
 _SPEED, _LANE, _XY, _INVALID = 0, 1, 2, 3
 
@@ -242,6 +249,10 @@ class SumoRun:
         self._background: set[str] = set()
         self._net: Any = None
         self._tls_state: dict[str, str] = {}
+        self._foes: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
+        #: Junction lanes that start at an internal junction (see geometry's stops).
+        self._internal_vias: set[str] = set()
+        self._via_from: dict[str, tuple[str, float, str, int]] | None = None
         self._trace_rows: list[tuple[Any, ...]] = []
         #: Vehicles whose SUMO lane position blendtrack does not know (read next step).
         self._read_position: set[str] = set()
@@ -437,6 +448,7 @@ class SumoRun:
             path = blendtrack.Path(geo.points, geo.widths, closed=False)
             lanes, edge_ids = self._lanes, self._edges
             stops = geo.stops
+            self._internal_vias.update(st[4] for st in stops if st[2] < 0)
             track = self.fleet.add_route(
                 path,
                 self.base_config,
@@ -725,7 +737,9 @@ class SumoRun:
             return lead
         # getNeighbors mode: bit 0 right (1) / left (0), bit 1 leaders (2).
         for nid, gap in v.getNeighbors(act.vid, 2 | (1 if direction < 0 else 0)):
-            if not (lead and lead[0] and lead[1] >= -100.0) or gap < lead[1]:
+            # A neighbour alongside (gap < 0) is no obstacle ahead: braking
+            # would leave the vehicle standing across both lanes.
+            if gap >= 0.0 and (not (lead and lead[0] and lead[1] >= -100.0) or gap < lead[1]):
                 lead = (nid, gap)
         return lead
 
@@ -842,12 +856,26 @@ class SumoRun:
             return
         current = int(index)
         direction = 1 if target > current else -1
-        if not self.sumo.vehicle.couldChangeLane(act.vid, direction):
+        v = self.sumo.vehicle
+        if not v.couldChangeLane(act.vid, direction):
             return
         lane_length = float(self._net_geometry().getLane(lane_id).getLength())
         length = min(max(2.0 * abs(speed), 10.0), 30.0, lane_length - pos - 1.0)
         if length < 8.0:
             return
+        # SUMO (without the sublane model) shows the vehicle on the target
+        # lane only once its centre is over the line, so vehicles there do
+        # not react to it before: start only with room for the whole change
+        # (its duration, at the present speed or 1 m/s, times the closing
+        # speed) plus a margin.
+        duration = length / max(abs(speed), 1.0)
+        side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
+        for nid, gap in v.getNeighbors(act.vid, side):
+            if gap < LANE_CHANGE_GAP_M + duration * max(v.getSpeed(nid) - speed, 0.0):
+                return
+        for nid, gap in v.getNeighbors(act.vid, side | 2):
+            if gap < LANE_CHANGE_GAP_M + duration * max(speed - v.getSpeed(nid), 0.0):
+                return
         geo2, track = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
         self.fleet.retrack(act.slot, track)
         act.geo = geo2
@@ -860,11 +888,65 @@ class SumoRun:
         if stop is None:
             return False
         via = self._lanes.name(stop[4])
+        if via in self._internal_vias:
+            return self._internal_junction_busy(vid, via)
         for link in self.sumo.vehicle.getNextLinks(vid):
             # (lane, has priority, is open, has foe, via lane, state, direction, length)
             if link[4] == via:
                 return (not link[1]) and bool(link[3])
         return False
+
+    def _internal_junction_busy(self, vid: str, via: str) -> bool:
+        """At the waiting point of a turn across oncoming lanes: is a foe
+        inside the junction, or about to enter it through an open link?
+
+        SUMO's ``getNextLinks`` does not report this internal link, and SUMO
+        does not register a vehicle moved by blendtrack as approaching it, so
+        the check is ours: a vehicle on a foe junction lane, or one on the
+        lane leading to it, with its link open, within ``INTERNAL_YIELD_S``
+        seconds or ``INTERNAL_YIELD_NEAR_M`` metres of the stop line.
+        """
+        lane_api, veh = self.sumo.lane, self.sumo.vehicle
+        for foe, incoming, length, tls, link in self._internal_foes(via):
+            if any(other != vid for other in lane_api.getLastStepVehicleIDs(foe)):
+                return True
+            if incoming is None:
+                continue
+            if tls:
+                state = self._tls_state.get(tls, "")
+                if 0 <= link < len(state) and state[link] not in "GgsOo":
+                    continue  # the foe's light is red or yellow: it stops
+            for other in lane_api.getLastStepVehicleIDs(incoming):
+                if other == vid:
+                    continue
+                dist = length - veh.getLanePosition(other)
+                if dist < INTERNAL_YIELD_NEAR_M or dist < INTERNAL_YIELD_S * veh.getSpeed(other):
+                    return True
+        return False
+
+    def _internal_foes(self, via: str) -> list[tuple[str, str | None, float, str, int]]:
+        """Foe junction lanes of an internal junction lane: (foe lane, the normal
+        lane leading into it or None, that lane's length, its traffic light, link index)."""
+        hit = self._foes.get(via)
+        if hit is None:
+            if self._via_from is None:
+                self._via_from = {}
+                for edge in self._net_geometry().getEdges():
+                    for ln in edge.getLanes():
+                        for c in ln.getOutgoing():
+                            if c.getViaLaneID():
+                                self._via_from[c.getViaLaneID()] = (
+                                    ln.getID(), float(ln.getLength()), c.getTLSID() or "", int(c.getTLLinkIndex()),
+                                )
+            hit = []
+            for foe in self.sumo.lane.getInternalFoes(via):
+                came = self._via_from.get(foe)
+                if came is None:
+                    hit.append((foe, None, 0.0, "", -1))
+                else:
+                    hit.append((foe, came[0], came[1], came[2], came[3]))
+            self._foes[via] = hit
+        return hit
 
     def _refresh_tls(self) -> None:
         tc = self._tc
