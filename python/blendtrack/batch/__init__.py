@@ -126,7 +126,7 @@ def run_batch(sweep: Sweep, opts: BatchOptions) -> BatchResult:
     t0 = time.perf_counter()
     executor = _executor(opts)
     store = ResultStore(opts.out)
-    existing = store.prepare(sweep, opts.resume)
+    existing = store.check(sweep, opts.resume)
     done = {rid for rid, rec in existing.items() if rec.get("status") == "ok"}
     todo = [r for r in sweep.runs if r.run_id not in done]
     by_id: dict[str, Run] = {r.run_id: r for r in todo}
@@ -140,8 +140,12 @@ def run_batch(sweep: Sweep, opts: BatchOptions) -> BatchResult:
     with tqdm(total=len(sweep.runs), initial=len(done), desc="blendtrack batch", unit="run", file=sys.stderr,
               disable=not opts.progress or None, dynamic_ncols=True) as bar:
         bar.set_postfix_str(postfix())
-        if todo:
+        if not todo:
+            store.start(sweep)
+        else:
+            # The executor first: a scheduler that cannot be reached leaves the folder untouched.
             with executor:
+                store.start(sweep)
                 tasks = [r.task(store.work(r.run_id), timeout) for r in todo]
                 for task, outcome in executor.map_unordered(tasks):
                     run = by_id[task["run_id"]]

@@ -260,7 +260,10 @@ class DaskExecutor:
                     self._client = Client(self.address, timeout="20s")
                 except (OSError, TimeoutError) as e:
                     raise BatchExecutorError(f"cannot connect to the Dask scheduler {self.address}: {e}") from None
-            versions = self._client.run(_blendtrack_version)
+            try:
+                versions = self._client.run(_blendtrack_version)
+            except Exception as e:  # a worker without blendtrack cannot even load the function
+                raise BatchExecutorError(f"a Dask worker cannot run blendtrack: {type(e).__name__}: {' '.join(str(e).split())}") from None
         except BaseException:
             self.__exit__(None, None, None)
             raise

@@ -212,19 +212,41 @@ def best_sets(manifest: dict[str, Any], ok: pd.DataFrame, metrics: Sequence[str]
             continue
         for scenario, sub in ok.groupby("scenario", sort=False):
             best: dict[str, Any] | None = None
+            means = []
             groups = sub.groupby(swept, sort=False, dropna=False) if swept else [((), sub)]
             for key, g in groups:
                 vals = _seed_means(g, metric)
                 m, lo, hi = mean_ci(vals)
                 if m != m:
                     continue
+                means.append(m)
                 if best is None or (m < best["mean"] if better == "lower" else m > best["mean"]):
                     key_t = key if isinstance(key, tuple) else (key,)
                     best = {"metric": metric, "better": better, "scenario": scenario, "params": dict(zip(swept, key_t)),
                             "mean": m, "ci_low": lo, "ci_high": hi, "seeds": len(vals)}
             if best is not None:
+                # How many other parameter sets have the same mean (e.g. no collision anywhere).
+                best["ties"] = sum(1 for m in means if m == best["mean"]) - 1
+                best["sets"] = len(means)
                 out.append(best)
     return out
+
+
+def _best_text(b: dict[str, Any]) -> str:
+    if b["sets"] > 1 and b["ties"] == b["sets"] - 1:
+        return f"all {b['sets']} sets equal"
+    text = _param_text(b["params"])
+    return f"{text} (tied with {b['ties']} more)" if b["ties"] else text
+
+
+def _metric_order(names: Sequence[str]) -> list[str]:
+    """The metrics in the order each kind lists them (tracking metrics before counts), others after."""
+    from blendtrack.batch.kinds import SUMO_SUMMARY_METRICS, SUMO_VEHICLE_METRICS
+    from blendtrack.simulation import EXTRA_METRIC_KEYS, METRIC_KEYS
+
+    known = [*METRIC_KEYS, *EXTRA_METRIC_KEYS, *SUMO_VEHICLE_METRICS, *SUMO_SUMMARY_METRICS]
+    rank = {k: i for i, k in enumerate(known)}
+    return sorted(names, key=lambda k: (rank.get(k, len(known)), list(names).index(k)))
 
 
 def _cell(text: Any) -> str:
@@ -245,7 +267,7 @@ def write_report(out: Path) -> pd.DataFrame:
     atomic_write(store.out / "results.csv", frame.to_csv(index=False))
 
     params = list(dict.fromkeys(k for m in manifest.get("runs", []) for k in m.get("params", {})))
-    metric_cols = [c for c in frame.columns if c not in META_COLUMNS and c not in params]
+    metric_cols = _metric_order([c for c in frame.columns if c not in META_COLUMNS and c not in params])
     ok = frame[frame["status"] == "ok"]
     plotted = [m for m in metric_cols if ok[m].notna().any() and not m.startswith("baseline_")]
     dims = _dims(manifest, frame)
@@ -295,7 +317,8 @@ def write_report(out: Path) -> pd.DataFrame:
         lines += ["No finished run.", ""]
     else:
         lines += [
-            "Per scenario, the parameter set whose mean over seeds is best; `better` says which way: lower for "
+            "Per scenario, the parameter set whose mean over seeds is best (ties are counted; \"all equal\" when no set "
+            "differs); `better` says which way: lower for "
             "errors, jerk, accelerations, steering rates, collisions, teleports, violations, warnings, conflicts, "
             "time loss, travel and settling time, overshoot, CO2 and fuel; higher for speed, throughput and distance. "
             "Metrics with no better direction (vehicle counts, lane changes) and compare's `baseline_*` are left out. "
@@ -306,7 +329,7 @@ def write_report(out: Path) -> pd.DataFrame:
         ]
         for b in best:
             ci = f"[{_fmt(b['ci_low'])}, {_fmt(b['ci_high'])}]" if b["ci_low"] == b["ci_low"] else "n/a"
-            lines.append(f"| {b['metric']} | {b['better']} | {b['scenario']} | {_param_text(b['params'])} | {_fmt(b['mean'])} | {ci} | {b['seeds']} |")
+            lines.append(f"| {b['metric']} | {b['better']} | {b['scenario']} | {_best_text(b)} | {_fmt(b['mean'])} | {ci} | {b['seeds']} |")
         lines.append("")
     lines += ["## Plots", ""]
     if plots:

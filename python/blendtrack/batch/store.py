@@ -100,14 +100,11 @@ class ResultStore:
             return None
         return data if isinstance(data, dict) else None
 
-    def prepare(self, sweep: Sweep, resume: bool) -> dict[str, dict[str, Any]]:
-        """Checks ``out`` can hold this sweep's results and returns the records already there.
+    def check(self, sweep: Sweep, resume: bool) -> dict[str, dict[str, Any]]:
+        """Checks ``out`` can hold this sweep's results (writing nothing) and returns the records already there.
 
         Without ``resume``, a folder that already holds a batch is an error;
         with it, a folder made from a different sweep (other run ids) is.
-        Removes left-over temporary files and the derived files (so an
-        interrupted batch leaves no report that looks complete), then writes
-        ``batch.json`` and ``sweep.toml``.
         """
         manifest = self.manifest()
         records = self.records()
@@ -126,16 +123,19 @@ class ResultStore:
                 f"{self.out} holds a batch of a different sweep ({gone} of its runs are not in {sweep.file}, "
                 f"{new} of the sweep's are not in it): choose another --out"
             )
+        return records
+
+    def start(self, sweep: Sweep) -> None:
+        """Makes the folders, removes left-over temporary files and the derived
+        files (so an interrupted batch leaves no report that looks complete),
+        and writes ``batch.json`` and ``sweep.toml``."""
         self.runs_dir.mkdir(parents=True, exist_ok=True)
         self.work_dir.mkdir(parents=True, exist_ok=True)
-        for tmp in self.runs_dir.glob(".*.tmp"):
+        for tmp in [*self.runs_dir.glob(".*.tmp"), *self.out.glob(".*.tmp")]:
             tmp.unlink(missing_ok=True)
         for name in DERIVED:
             (self.out / name).unlink(missing_ok=True)
-        for tmp in self.out.glob(".*.tmp"):
-            tmp.unlink(missing_ok=True)
         write_manifest(self.out, sweep)
-        return records
 
     def write(self, record: dict[str, Any]) -> None:
         atomic_write(self.runs_dir / f"{record['run_id']}.json", json.dumps(record, indent=2, allow_nan=False) + "\n")
