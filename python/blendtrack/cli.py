@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path as FsPath
@@ -394,6 +395,9 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         timeout_s=args.timeout,
         progress=not args.quiet,
     )
+    # SIGTERM (kill, a cluster's job scheduler) stops the batch as Ctrl-C does:
+    # the running runs are killed with their SUMO processes, the records stay.
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
     try:
         result = batch.run_batch(sweep, options)
     except KeyboardInterrupt:
@@ -404,6 +408,8 @@ def _cmd_batch(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
         return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     failed = result.failed + result.timeout
     before = f" ({result.skipped} from before)" if result.skipped else ""
     print(
@@ -411,6 +417,10 @@ def _cmd_batch(args: argparse.Namespace) -> int:
         f"{result.timeout} timed out; {result.wall_time_s:.1f} s on {result.executor}; also results.parquet, results.csv"
     )
     return 1 if failed else 0
+
+
+def _raise_interrupt(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
 
 
 def _positive_int(what: str):  # type: ignore[no-untyped-def]

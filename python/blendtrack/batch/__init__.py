@@ -156,8 +156,8 @@ def run_batch(sweep: Sweep, opts: BatchOptions) -> BatchResult:
                     counts[status] += 1
                     if status != "ok":
                         tqdm.write(f"blendtrack batch: {run.name} ({run.run_id}) {status}: {record['error']}", file=sys.stderr)
+                    bar.set_postfix_str(postfix(), refresh=False)
                     bar.update(1)
-                    bar.set_postfix_str(postfix())
     write_report(store.out)
     return BatchResult(
         out=store.out,

@@ -50,6 +50,8 @@ _TAIL_LINES = 3
 
 _live: set[subprocess.Popen[bytes]] = set()
 _live_lock = threading.Lock()
+#: Set by kill_running: a run process started after it is killed at once.
+_stopping = threading.Event()
 
 
 def _signal_name(number: int) -> str:
@@ -85,6 +87,7 @@ def _kill_tree(proc: subprocess.Popen[bytes]) -> None:
 def kill_running() -> None:
     """Kills every run process this process started that is still running (on Ctrl-C)."""
     with _live_lock:
+        _stopping.set()
         procs = list(_live)
     for proc in procs:
         _kill_tree(proc)
@@ -129,7 +132,10 @@ def run_isolated(task: dict[str, Any]) -> dict[str, Any]:
         )
         with _live_lock:
             _live.add(proc)
+            stopping = _stopping.is_set()
         try:
+            if stopping:  # started while the batch was being interrupted
+                _kill_tree(proc)
             code = proc.wait(timeout=timeout)
         except subprocess.TimeoutExpired:
             _kill_tree(proc)
@@ -179,6 +185,7 @@ class LocalExecutor:
         self._pool: ThreadPoolExecutor | None = None
 
     def __enter__(self) -> LocalExecutor:
+        _stopping.clear()
         self._pool = ThreadPoolExecutor(max_workers=self.workers, thread_name_prefix="blendtrack-batch")
         return self
 
