@@ -446,7 +446,7 @@ def _add_batch_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> Non
             "[[cases]] x seeds), each in a worker process of its own, and writes DIR/runs/<id>.json as each run "
             "finishes (atomically: a record is complete or absent, even after SIGKILL), then DIR/results.parquet, "
             "DIR/results.csv (one row per run), DIR/plots/ and DIR/summary.md (runs per status, each metric against "
-            "each swept parameter with its 95%% CI over seeds, the best parameter set per metric, failed runs). A run "
+            "each swept parameter with its 95% CI over seeds, the best parameter set per metric, failed runs). A run "
             "that fails, crashes or times out is recorded as such and the others go on; --resume runs again only what "
             "has no ok record. Exit code: 0 when every run is ok, 1 when some failed, 2 on bad input, 130 on Ctrl-C. "
             "See the README, section 'Batch sweeps', for the file format and for running on a Dask cluster."
