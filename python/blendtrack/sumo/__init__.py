@@ -41,7 +41,22 @@ def config_keys(file: str | Path) -> set[str]:
 
 def run_scenario(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     """Runs ``scenario`` and writes ``out/vehicles.csv``, ``out/summary.json``,
-    the plots, the optional trace, and SUMO's outputs under ``out/sumo/``."""
+    the plots, the optional trace, and SUMO's outputs under ``out/sumo/``.
+
+    libsumo allows one simulation per process reliably (see ``SumoRun.start``):
+    when this process has run one already, the run happens in a fresh child
+    process and its result comes back here; a crash there is a
+    :class:`ScenarioError`, not a dead interpreter.
+    """
+    from blendtrack.sumo import runner
+
+    uses_libsumo = options.backend == "libsumo" and not options.gui
+    if uses_libsumo and runner._LIBSUMO_STARTED:
+        return _run_in_child(scenario, options, out)
+    return _run_here(scenario, options, out)
+
+
+def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     from blendtrack.sumo import report
 
     out.mkdir(parents=True, exist_ok=True)
@@ -53,3 +68,15 @@ def run_scenario(scenario: Scenario, options: RunOptions, out: Path) -> RunResul
     report.plot_run(result, out, scenario.comfort_lateral_accel_mps2)
     report.write_json(result.summary, out / "summary.json")
     return result
+
+
+def _run_in_child(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        try:
+            return pool.submit(_run_here, scenario, options, out).result()
+        except BrokenProcessPool:
+            raise ScenarioError(f"{scenario.sumocfg}: the SUMO process died (crash) during the run") from None

@@ -54,7 +54,7 @@ import numpy as np
 
 import blendtrack
 from blendtrack import ControllerConfig, RouteFleet, VehicleParams
-from blendtrack.sumo.geometry import RouteGeometry, route_geometry
+from blendtrack.sumo.geometry import RouteGeometry, _via_chain, route_geometry
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 
 #: vType parameter that marks a type as controlled.
@@ -82,6 +82,9 @@ ROUTE_CHECK_EVERY = 10
 # a vehicle waits while a foe is this many seconds or metres from its stop line.
 INTERNAL_YIELD_S = 4.0
 INTERNAL_YIELD_NEAR_M = 5.0
+# True once this process has started a libsumo simulation (see SumoRun.start).
+_LIBSUMO_STARTED = False
+
 # RouteFleet move codes.
 _SPEED, _LANE, _XY, _INVALID = 0, 1, 2, 3
 
@@ -252,7 +255,7 @@ class SumoRun:
         self._foes: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
         #: Junction lanes that start at an internal junction (see geometry's stops).
         self._internal_vias: set[str] = set()
-        self._via_from: dict[str, tuple[str, float, str, int]] | None = None
+        self._conn_of_via: dict[str, Any] | None = None
         self._trace_rows: list[tuple[Any, ...]] = []
         #: Vehicles whose SUMO lane position blendtrack does not know (read next step).
         self._read_position: set[str] = set()
@@ -270,6 +273,8 @@ class SumoRun:
         self.sumo: Any = None
         self._tc: Any = None
         self._use_subscriptions = False
+        self.backend = "libsumo"
+        self.backend_note = ""
 
     # ------------------------------------------------------------------ SUMO
     def _command(self) -> list[str]:
@@ -295,8 +300,19 @@ class SumoRun:
         return cmd
 
     def start(self) -> None:
+        global _LIBSUMO_STARTED
         _sumo_home()
-        if self.opt.backend == "traci" or self.opt.gui:
+        self.backend = "traci" if (self.opt.backend == "traci" or self.opt.gui) else "libsumo"
+        if self.backend == "libsumo" and _LIBSUMO_STARTED:
+            # libsumo 1.28 keeps state across simulations in one process: a
+            # second simulation of the urban grid after one with every
+            # vehicle moved by moveToXY crashed (segmentation fault). A
+            # second run in a process therefore drives SUMO over TraCI (its
+            # own process; same results, slower); run_scenario avoids this by
+            # running it in a fresh process instead.
+            self.backend = "traci"
+            self.backend_note = "libsumo was already used in this process: TraCI instead"
+        if self.backend == "traci":
             import traci
             import traci.constants as tc
 
@@ -322,6 +338,7 @@ class SumoRun:
             self.sumo = libsumo
             self._tc = tc
             self._use_subscriptions = False
+            _LIBSUMO_STARTED = True
             try:
                 libsumo.start(self._command())
             except Exception as e:
@@ -557,7 +574,8 @@ class SumoRun:
         summary = {
             "scenario": self.scenario.name,
             "sumocfg": str(self.scenario.sumocfg),
-            "backend": "traci" if (self.opt.backend == "traci" or self.opt.gui) else "libsumo",
+            "backend": self.backend,
+            "backend_note": self.backend_note,
             "seed": self.opt.seed,
             "end_s": t_end,
             "steps": steps,
@@ -926,25 +944,35 @@ class SumoRun:
 
     def _internal_foes(self, via: str) -> list[tuple[str, str | None, float, str, int]]:
         """Foe junction lanes of an internal junction lane: (foe lane, the normal
-        lane leading into it or None, that lane's length, its traffic light, link index)."""
+        lane leading into it or None, that lane's length, its traffic light, link
+        index). From the network's right-of-way matrix (sumolib), not from
+        libsumo's ``lane.getInternalFoes``: that call leaves state behind which
+        crashes a later simulation in the same process (libsumo 1.28)."""
         hit = self._foes.get(via)
         if hit is None:
-            if self._via_from is None:
-                self._via_from = {}
-                for edge in self._net_geometry().getEdges():
+            net = self._net_geometry()
+            if self._conn_of_via is None:
+                self._conn_of_via = {}
+                for edge in net.getEdges():
                     for ln in edge.getLanes():
                         for c in ln.getOutgoing():
-                            if c.getViaLaneID():
-                                self._via_from[c.getViaLaneID()] = (
-                                    ln.getID(), float(ln.getLength()), c.getTLSID() or "", int(c.getTLLinkIndex()),
-                                )
+                            for part in _via_chain(net, c):
+                                self._conn_of_via[part.getID()] = c
             hit = []
-            for foe in self.sumo.lane.getInternalFoes(via):
-                came = self._via_from.get(foe)
-                if came is None:
-                    hit.append((foe, None, 0.0, "", -1))
-                else:
-                    hit.append((foe, came[0], came[1], came[2], came[3]))
+            c = self._conn_of_via.get(via)
+            if c is not None:
+                node = c.getFrom().getToNode()
+                i = node.getLinkIndex(c)
+                for other in node.getConnections():
+                    j = node.getLinkIndex(other)
+                    if other is c or i < 0 or j < 0 or not node.areFoes(i, j):
+                        continue
+                    chain = [part.getID() for part in _via_chain(net, other)]
+                    if not chain:
+                        continue
+                    src = other.getFromLane()
+                    hit.append((chain[0], src.getID(), float(src.getLength()), other.getTLSID() or "", int(other.getTLLinkIndex())))
+                    hit.extend((part, None, 0.0, "", -1) for part in chain[1:])
             self._foes[via] = hit
         return hit
 
