@@ -117,3 +117,13 @@ def test_cli_main_returns_exit_code() -> None:
     with pytest.raises(SystemExit) as exc_info:
         main(["--no-such-flag"])
     assert exc_info.value.code == 2
+
+
+def test_configs_pickle_with_their_values() -> None:
+    """Configs cross process boundaries (batch workers, run_scenario's child)."""
+    c = blendtrack.ControllerConfig(lat_blend_factor=0.37, preferred_speed=12.345678901234).replace(use_path_widths=False)
+    back = pickle.loads(pickle.dumps(c))
+    assert back == c and back.preferred_speed == 12.345678901234 and back.use_path_widths is False
+    assert back != blendtrack.ControllerConfig()
+    v = blendtrack.VehicleParams(wheelbase_m=2.9)
+    assert pickle.loads(pickle.dumps(v)) == v != blendtrack.VehicleParams()

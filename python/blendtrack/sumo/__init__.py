@@ -45,8 +45,11 @@ def run_scenario(scenario: Scenario, options: RunOptions, out: Path) -> RunResul
 
     libsumo allows one simulation per process reliably (see ``SumoRun.start``):
     when this process has run one already, the run happens in a fresh child
-    process and its result comes back here; a crash there is a
-    :class:`ScenarioError`, not a dead interpreter.
+    process (spawned: a script that calls this more than once needs an
+    ``if __name__ == "__main__":`` guard) and its result comes back here; a
+    crash there is a :class:`ScenarioError`, not a dead interpreter. Options
+    and results are pickled across (ControllerConfig and VehicleParams
+    pickle through their TOML).
     """
     from blendtrack.sumo import runner
 
@@ -79,4 +82,8 @@ def _run_in_child(scenario: Scenario, options: RunOptions, out: Path) -> RunResu
         try:
             return pool.submit(_run_here, scenario, options, out).result()
         except BrokenProcessPool:
-            raise ScenarioError(f"{scenario.sumocfg}: the SUMO process died (crash) during the run") from None
+            raise ScenarioError(
+                f"{scenario.sumocfg}: the process running SUMO died: SUMO crashed, or a script calling"
+                " run_scenario twice lacks an `if __name__ == \"__main__\":` guard (the second run"
+                " starts a fresh Python process, which imports the script)"
+            ) from None

@@ -310,6 +310,13 @@ impl ControllerConfig {
     fn __deepcopy__(&self, _memo: &Bound<'_, PyAny>) -> Self {
         self.clone()
     }
+
+    /// Pickling (worker processes of `blendtrack batch`, `run_scenario`'s
+    /// child process): rebuilt from its TOML, validated again.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
+        let text = slf.borrow().to_toml(false)?;
+        Ok((slf.get_type().getattr("from_toml")?, (text, "<pickle>")))
+    }
 }
 
 /// Physical limits of the vehicle (wheelbase, steering, acceleration, speed).
@@ -397,6 +404,12 @@ impl VehicleParams {
 
     fn to_toml(&self) -> PyResult<String> {
         toml::to_string(&self.to_core()?).map_err(|e| PyConfigError::new_err(e.to_string()))
+    }
+
+    /// Pickling: rebuilt from its TOML, validated again.
+    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
+        let text = slf.borrow().to_toml()?;
+        Ok((slf.get_type().getattr("from_toml")?, (text, "<pickle>")))
     }
 
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
