@@ -273,8 +273,7 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         alpha=args.alpha,
         config=config,
         vehicle=vehicle,
-        fixed_path_width="path_width_m" in keys,
-        fixed_preferred_speed="preferred_speed" in keys,
+        fixed_keys=frozenset(keys),
         end_s=args.end,
         seed=args.seed,
         backend="traci" if args.gui else args.backend,
@@ -308,8 +307,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         alpha=args.alpha,
         config=config,
         vehicle=vehicle,
-        fixed_path_width="path_width_m" in keys,
-        fixed_preferred_speed="preferred_speed" in keys,
+        fixed_keys=frozenset(keys),
     )
     opts = compare.CompareOptions(
         baseline=args.baseline,

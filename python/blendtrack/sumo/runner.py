@@ -73,6 +73,9 @@ LANE_CHANGE_ROOM_M = 15.0
 # A lane change starts only with this gap (m), plus what the closing speed
 # eats during the change, to the vehicles ahead and behind on the target lane.
 LANE_CHANGE_GAP_M = 5.0
+# A lane change whose vehicle is still within this distance (m) of its lane's
+# centre is checked again every step and given up when the room has gone.
+ABORT_CHANGE_LAT_M = 0.5
 # How far before a junction without priority a vehicle asks SUMO whether foes approach (m).
 YIELD_LOOKAHEAD_M = 30.0
 # A controlled vehicle's route id is compared with SUMO's every this many steps
@@ -137,12 +140,13 @@ class RunOptions:
     alpha: float | None = None
     config: ControllerConfig | None = None
     vehicle: VehicleParams | None = None
-    #: True when the config file set ``path_width_m`` (then the lanes' widths are not used).
-    fixed_path_width: bool = False
-    #: True when the config file set ``preferred_speed``; otherwise each
-    #: vehicle aims at its vType's desired speed (maxSpeed x speedFactor),
-    #: capped by the lane's limit.
-    fixed_preferred_speed: bool = False
+    #: Controller keys the user set explicitly (config file, sweep): those
+    #: keep their value. Otherwise ``path_width_m`` comes from the lanes'
+    #: widths, ``preferred_speed`` from the vType's desired speed (maxSpeed x
+    #: the vehicle's speedFactor, capped by the lane's limit), and
+    #: ``max_obs_deceleration`` equals ``max_deceleration`` (why: see
+    #: ``SumoRun._type_info``).
+    fixed_keys: frozenset[str] = frozenset()
     end_s: float | None = None
     seed: int = 0
     backend: str = "libsumo"  # or "traci"
@@ -227,7 +231,9 @@ class SumoRun:
         self.opt = options
         # Absolute: SUMO resolves relative output paths against the scenario's folder.
         self.out_dir = out_dir.resolve() if out_dir is not None else None
-        self.base_config = (options.config or ControllerConfig()).replace(use_path_widths=not options.fixed_path_width)
+        self.base_config = (options.config or ControllerConfig()).replace(
+            use_path_widths="path_width_m" not in options.fixed_keys
+        )
         self.base_vehicle = options.vehicle or VehicleParams()
         if options.alpha is not None:
             self.base_config = self.base_config.replace(lat_blend_factor=options.alpha)
@@ -264,7 +270,7 @@ class SumoRun:
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         self.cheap_moves = 0
         #: (time, vehicle, traffic light, link index, stop line arc length) of each red-light crossing.
@@ -409,6 +415,20 @@ class SumoRun:
                 target[key] = _parse_like(raw, current)
             except ValueError:
                 raise ScenarioError(f"vType {vtype!r}: param {PARAM_PREFIX + key} = {raw!r} is not a valid {type(current).__name__}") from None
+        param_keys = {PARAM_PREFIX + k for k in (*overrides, *vehicle_overrides)}
+        # max_obs_deceleration in SUMO runs, unless set explicitly
+        # (RunOptions.fixed_keys or a blendtrack.* vType param): the paper assumes an
+        # obstacle braking at 8 m/s^2 while the vehicle plans with 4, which at 33 m/s
+        # keeps about 3 s to a leader and cuts a highway's capacity nearly in half
+        # (measured: 378 instead of 650 vehicles entered, highway_onramp x2, 300 s,
+        # every vehicle controlled). Here the leader is assumed to brake as hard as
+        # the vehicle plans to (max_obs_deceleration = max_deceleration): about
+        # reaction_time s of headway at equal speeds, the assumption of SUMO's Krauss
+        # model. preferred_acceleration keeps the paper's 1 m/s^2: with the vType's
+        # 2.6 m/s^2 the urban grid with every vehicle controlled had 3 junction
+        # collisions in 300 s (README, known limits).
+        if "max_obs_deceleration" not in self.opt.fixed_keys and "max_obs_deceleration" not in overrides:
+            overrides["max_obs_deceleration"] = overrides.get("max_deceleration", self.base_config.max_deceleration)
         try:
             cfg = self.base_config.replace(**overrides) if overrides else self.base_config
             veh = self.base_vehicle.replace(**vehicle_overrides) if vehicle_overrides else self.base_vehicle
@@ -421,7 +441,7 @@ class SumoRun:
         if wheelbase != veh.wheelbase_m:
             veh = veh.replace(wheelbase_m=wheelbase)
         info = {
-            "param_keys": {PARAM_PREFIX + k for k in (*overrides, *vehicle_overrides)},
+            "param_keys": param_keys,
             "controlled_param": controlled_param in ("1", "true", "yes"),
             "config": cfg,
             "vehicle": veh,
@@ -507,7 +527,7 @@ class SumoRun:
         geo, track = self._geometry(edges, max(lane_index, 0))
         veh: VehicleParams = info["vehicle"]
         cfg: ControllerConfig = info["config"]
-        if not self.opt.fixed_preferred_speed and PARAM_PREFIX + "preferred_speed" not in info["param_keys"]:
+        if "preferred_speed" not in self.opt.fixed_keys and PARAM_PREFIX + "preferred_speed" not in info["param_keys"]:
             cfg = cfg.replace(preferred_speed=info["max_speed"] * float(v.getSpeedFactor(vid)))
         x, y = v.getPosition(vid)
         theta = math.pi / 2.0 - math.radians(float(v.getAngle(vid)))
@@ -595,6 +615,7 @@ class SumoRun:
             "moves_lane_position": self.cheap_moves,
             "moves_xy": self.xy_moves,
             "reroutes": self.counts["reroutes"],
+            "lane_changes_aborted": self.counts["lane_changes_aborted"],
         }
         samples = self.fleet.take_samples()
         return RunResult(self.records, summary, self._trajectories, samples)
@@ -753,6 +774,15 @@ class SumoRun:
         if v.getLaneIndex(act.vid) == target:
             act.changing = None
             return lead
+        if abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M:
+            # Barely started (or held at its start by a leader): the room
+            # checked when it began may be gone, e.g. a follower has come up
+            # on the target lane while the vehicle stood. Check again.
+            speed = float(v.getSpeed(act.vid))
+            length = min(max(2.0 * abs(speed), 10.0), 30.0)
+            if not self._target_lane_clear(act.vid, direction, speed, length / max(abs(speed), 1.0)):
+                self._abort_change(act)
+                return lead
         # getNeighbors mode: bit 0 right (1) / left (0), bit 1 leaders (2).
         for nid, gap in v.getNeighbors(act.vid, 2 | (1 if direction < 0 else 0)):
             # A neighbour alongside (gap < 0) is no obstacle ahead: braking
@@ -886,19 +916,37 @@ class SumoRun:
         # not react to it before: start only with room for the whole change
         # (its duration, at the present speed or 1 m/s, times the closing
         # speed) plus a margin.
-        duration = length / max(abs(speed), 1.0)
-        side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
-        for nid, gap in v.getNeighbors(act.vid, side):
-            if gap < LANE_CHANGE_GAP_M + duration * max(v.getSpeed(nid) - speed, 0.0):
-                return
-        for nid, gap in v.getNeighbors(act.vid, side | 2):
-            if gap < LANE_CHANGE_GAP_M + duration * max(speed - v.getSpeed(nid), 0.0):
-                return
+        if not self._target_lane_clear(act.vid, direction, speed, length / max(abs(speed), 1.0)):
+            return
         geo2, track = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
         self.fleet.retrack(act.slot, track)
         act.geo = geo2
         act.changing = (direction, target)
         act.record.lane_changes += 1
+
+    def _target_lane_clear(self, vid: str, direction: int, speed: float, duration: float) -> bool:
+        """Room on the target lane for a change lasting ``duration`` seconds:
+        the gap to the follower and to the leader there, each at least
+        ``LANE_CHANGE_GAP_M`` plus what the closing speed eats in that time."""
+        v = self.sumo.vehicle
+        side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
+        for nid, gap in v.getNeighbors(vid, side):
+            if gap < LANE_CHANGE_GAP_M + duration * max(v.getSpeed(nid) - speed, 0.0):
+                return False
+        for nid, gap in v.getNeighbors(vid, side | 2):
+            if gap < LANE_CHANGE_GAP_M + duration * max(speed - v.getSpeed(nid), 0.0):
+                return False
+        return True
+
+    def _abort_change(self, act: _Active) -> None:
+        """Back to the lane the vehicle is on, the change pending again (it is
+        retried when there is room)."""
+        lane_index = int(self.sumo.vehicle.getLaneIndex(act.vid))
+        geo, track = self._geometry(act.geo.edges, max(lane_index, 0))
+        self.fleet.retrack(act.slot, track)
+        act.geo = geo
+        act.changing = None
+        self.counts["lane_changes_aborted"] += 1
 
     def _must_yield(self, vid: str, slot: int) -> bool:
         """SUMO's view of the link ahead: does it lack priority with foes approaching?"""
