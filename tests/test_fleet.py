@@ -115,3 +115,19 @@ def test_inputs_of_other_dtypes_are_accepted() -> None:
     out = fleet.step(np.array([s], dtype=np.int32), [10], [1], np.array([0.0], dtype=np.float32), [2.0], [0.0])
     assert out["ok"][0] and out["lateral_error_m"][0] == pytest.approx(1.0)
     assert "x_m" not in out  # no dt, no next state
+
+
+def test_axle_errors_of_a_yawed_vehicle_on_a_straight() -> None:
+    """On the centreline of a straight, yawed by 0.1 rad: the rear axle's
+    error is 0, the front axle's E sin(0.1) (E = 2.6 m, to the left: > 0),
+    the control point's alpha times that."""
+    fleet = blendtrack.Fleet()
+    track = fleet.add_track(blendtrack.Path.straight(200.0, 1.0), blendtrack.ControllerConfig())
+    alpha = 0.3
+    slot = fleet.add_vehicle(track, blendtrack.ControllerConfig(lat_blend_factor=alpha))
+    one = np.array
+    out = fleet.step(one([slot]), one([50.0]), one([0.0]), one([0.1]), one([5.0]), one([0.0]))
+    front = 2.6 * np.sin(0.1)
+    assert out["lateral_error_rear_m"][0] == pytest.approx(0.0, abs=1e-12)
+    assert out["lateral_error_front_m"][0] == pytest.approx(front, rel=1e-12)
+    assert out["lateral_error_m"][0] == pytest.approx(alpha * front, rel=1e-12)

@@ -74,8 +74,26 @@ def test_rural_loop_outputs_and_plots(rural: tuple[Path, sumo.RunResult]) -> Non
     for name in ("lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png"):
         assert (out / name).stat().st_size > 5_000, name
     trip = ET.parse(out / "sumo" / "tripinfo.xml").getroot()
-    assert trip.find("tripinfo") is not None or len(list(trip)) >= 0
+    assert trip.tag == "tripinfos", "SUMO's tripinfo output (trips finished within the run)"
     assert (out / "sumo" / "fcd.xml").stat().st_size > 0
+
+
+def test_axle_errors_are_reported_at_fixed_points(tmp_path: Path) -> None:
+    """vehicles.csv also has the mean |error| at the rear and at the front
+    axle, the same points whatever alpha is (for comparing alphas). With
+    alpha = 1 the control point is the front axle, with alpha = 0 the rear."""
+    sc = sumo.resolve_scenario("rural_loop")
+    for alpha, axle in ((1.0, "front"), (0.0, "rear")):
+        out = tmp_path / axle
+        sumo.run_scenario(sc, RunOptions(end_s=60, alpha=alpha, progress=False), out)
+        rows = _read_vehicles(out)
+        assert rows
+        for r in rows:
+            e_p = float(r["lateral_error_mean_abs_m"])
+            e_axle = float(r[f"lateral_error_{axle}_axle_mean_abs_m"])
+            other = "rear" if axle == "front" else "front"
+            assert e_p == pytest.approx(e_axle, rel=1e-9, abs=1e-12), (r["id"], e_p, e_axle)
+            assert float(r[f"lateral_error_{other}_axle_mean_abs_m"]) != pytest.approx(e_p, rel=1e-3), r["id"]
 
 
 @pytest.fixture(scope="module")

@@ -42,6 +42,8 @@ SUMO_VEHICLE_METRICS = (
     "lateral_error_mean_abs_m",
     "lateral_error_rms_m",
     "lateral_error_max_abs_m",
+    "lateral_error_rear_axle_mean_abs_m",
+    "lateral_error_front_axle_mean_abs_m",
     "heading_error_rms_deg",
     "mean_speed_mps",
     "lateral_accel_max_mps2",

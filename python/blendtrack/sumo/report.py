@@ -34,6 +34,8 @@ VEHICLE_COLUMNS = (
     "teleports",
 )
 EXTRA_COLUMNS = (
+    "lateral_error_rear_axle_mean_abs_m",
+    "lateral_error_front_axle_mean_abs_m",
     "vtype",
     "depart_s",
     "end_s",
@@ -63,6 +65,8 @@ def vehicle_row(r: VehicleRecord) -> dict[str, Any]:
         "travel_time_s": r.end_s - r.depart_s,
         "collisions": r.collisions,
         "teleports": r.teleports,
+        "lateral_error_rear_axle_mean_abs_m": r.sum_abs_e_rear / n if r.steps else nan,
+        "lateral_error_front_axle_mean_abs_m": r.sum_abs_e_front / n if r.steps else nan,
         "vtype": r.vtype,
         "depart_s": r.depart_s,
         "end_s": r.end_s,

@@ -178,6 +178,9 @@ class VehicleRecord:
     sum_abs_e: float = 0.0
     sum_e2: float = 0.0
     max_abs_e: float = 0.0
+    #: |lateral error| sums at the rear and the front axle (the same points for every alpha).
+    sum_abs_e_rear: float = 0.0
+    sum_abs_e_front: float = 0.0
     sum_eth2: float = 0.0
     sum_v: float = 0.0
     max_lat_acc: float = 0.0

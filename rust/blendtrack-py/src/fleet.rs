@@ -124,8 +124,9 @@ impl Fleet {
 
     /// One control step for the listed slots (see the class docs). Returns a
     /// dict of arrays in the order of `slots`: ok, steering_rad, accel_mps2,
-    /// alpha, lateral_error_m, heading_error_rad, s_m, s_rear_m, curvature_per_m,
-    /// virtual_obstacle_m, and with `dt` the next state x_m, y_m, theta_rad,
+    /// alpha, lateral_error_m, heading_error_rad, s_m, s_rear_m,
+    /// lateral_error_rear_m, lateral_error_front_m (the axles' errors),
+    /// curvature_per_m, virtual_obstacle_m, and with `dt` the next state x_m, y_m, theta_rad,
     /// v_mps, delta_rad.
     #[pyo3(signature = (slots, x, y, theta, v, delta, alpha = None, leader_gap = None, leader_speed = None, stop_gap = None, speed_limit = None, dt = None))]
     #[allow(clippy::too_many_arguments)]
@@ -190,6 +191,8 @@ impl Fleet {
             ("heading_error_rad", out.heading_error_rad),
             ("s_m", out.s_m),
             ("s_rear_m", out.s_rear_m),
+            ("lateral_error_rear_m", out.lateral_error_rear_m),
+            ("lateral_error_front_m", out.lateral_error_front_m),
             ("curvature_per_m", out.curvature_per_m),
             ("virtual_obstacle_m", out.virtual_obstacle_m),
         ] {

@@ -57,6 +57,8 @@ fn stats_dict<'py>(
     d.set_item("sum_abs_e", s.sum_abs_e)?;
     d.set_item("sum_e2", s.sum_e2)?;
     d.set_item("max_abs_e", s.max_abs_e)?;
+    d.set_item("sum_abs_e_rear", s.sum_abs_e_rear)?;
+    d.set_item("sum_abs_e_front", s.sum_abs_e_front)?;
     d.set_item("sum_eth2", s.sum_eth2)?;
     d.set_item("sum_v", s.sum_v)?;
     d.set_item("distance_m", s.distance_m)?;

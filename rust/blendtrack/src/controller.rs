@@ -47,6 +47,10 @@ pub struct ControlOutput {
     pub steering_rear_rad: f64,
     /// Arc length of the rear axle's foot point.
     pub s_rear_m: f64,
+    /// Signed lateral errors of the rear and the front axle: the same two
+    /// points whatever alpha is, so runs with different alphas compare there.
+    pub lateral_error_rear_m: f64,
+    pub lateral_error_front_m: f64,
     /// Arc length, signed lateral error and heading error of the control point P(alpha).
     pub s_m: f64,
     pub lateral_error_m: f64,
@@ -184,15 +188,15 @@ impl Controller {
 
         let rear = path.project_with_no_curvature(&rear_pt, self.hint_rear);
         self.hint_rear = Some(rear.s);
+        // Every controller projects the front axle: its error is reported.
+        let front = self.project_front(&front_pt);
         let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
             LateralKind::Blend => {
-                let front = self.project_front(&front_pt);
                 let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
                 let dr = rear_command(path, &rear, measured.theta_rad, speed, dir, &self.gains);
                 (alpha, df, dr)
             }
             LateralKind::Stanley => {
-                let front = self.project_front(&front_pt);
                 let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
                 (1.0, df, f64::NAN)
             }
@@ -237,6 +241,8 @@ impl Controller {
             steering_front_rad: d_front,
             steering_rear_rad: d_rear,
             s_rear_m: rear.s,
+            lateral_error_rear_m: rear.lateral_m,
+            lateral_error_front_m: front.lateral_m,
             s_m: cp.s,
             lateral_error_m: cp.lateral_m,
             heading_error_rad: wrap_angle(th_travel - cp.heading_rad),

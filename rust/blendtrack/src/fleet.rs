@@ -132,6 +132,9 @@ pub struct FleetOutputs {
     pub s_m: Vec<f64>,
     /// Arc length of the rear axle's foot point.
     pub s_rear_m: Vec<f64>,
+    /// Signed lateral errors of the rear and the front axle (fixed points).
+    pub lateral_error_rear_m: Vec<f64>,
+    pub lateral_error_front_m: Vec<f64>,
     pub curvature_per_m: Vec<f64>,
     /// Distance to the virtual obstacle (m, +inf on free road).
     pub virtual_obstacle_m: Vec<f64>,
@@ -433,6 +436,8 @@ impl Fleet {
             heading_error_rad: col(|r| r.heading_error_rad),
             s_m: col(|r| r.s_m),
             s_rear_m: col(|r| r.s_rear_m),
+            lateral_error_rear_m: col(|r| r.lateral_error_rear_m),
+            lateral_error_front_m: col(|r| r.lateral_error_front_m),
             curvature_per_m: col(|r| r.curvature_per_m),
             virtual_obstacle_m: col(|r| r.virtual_obstacle_m),
             next: inp.dt_s.map(|_| NextStates {
@@ -461,6 +466,8 @@ struct Row {
     heading_error_rad: f64,
     s_m: f64,
     s_rear_m: f64,
+    lateral_error_rear_m: f64,
+    lateral_error_front_m: f64,
     curvature_per_m: f64,
     virtual_obstacle_m: f64,
     next: VehicleState,
@@ -478,6 +485,8 @@ impl Default for Row {
             heading_error_rad: nan,
             s_m: nan,
             s_rear_m: nan,
+            lateral_error_rear_m: nan,
+            lateral_error_front_m: nan,
             curvature_per_m: nan,
             virtual_obstacle_m: nan,
             next: VehicleState {
@@ -564,6 +573,8 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
         heading_error_rad: o.heading_error_rad,
         s_m: o.s_m,
         s_rear_m: o.s_rear_m,
+        lateral_error_rear_m: o.lateral_error_rear_m,
+        lateral_error_front_m: o.lateral_error_front_m,
         curvature_per_m: o.curvature_per_m,
         virtual_obstacle_m: o.virtual_obstacle_m,
         next,

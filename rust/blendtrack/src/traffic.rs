@@ -286,6 +286,10 @@ pub struct DriveStats {
     pub sum_abs_e: f64,
     pub sum_e2: f64,
     pub max_abs_e: f64,
+    /// Sums of |lateral error| at the rear and at the front axle: the same
+    /// points for every alpha (`sum_abs_e` is of the control point P(alpha)).
+    pub sum_abs_e_rear: f64,
+    pub sum_abs_e_front: f64,
     pub sum_eth2: f64,
     pub sum_v: f64,
     pub distance_m: f64,
@@ -308,6 +312,8 @@ impl Default for DriveStats {
             sum_abs_e: 0.0,
             sum_e2: 0.0,
             max_abs_e: 0.0,
+            sum_abs_e_rear: 0.0,
+            sum_abs_e_front: 0.0,
             sum_eth2: 0.0,
             sum_v: 0.0,
             distance_m: 0.0,
@@ -967,6 +973,8 @@ impl RouteFleet {
                 s.sum_abs_e += ae;
                 s.sum_e2 += ae * ae;
                 s.max_abs_e = s.max_abs_e.max(ae);
+                s.sum_abs_e_rear += out.lateral_error_rear_m[i].abs();
+                s.sum_abs_e_front += out.lateral_error_front_m[i].abs();
                 s.sum_eth2 += eth * eth;
                 s.sum_v += v.abs();
                 s.distance_m += v.abs() * dt_s;
@@ -1426,6 +1434,23 @@ mod tests {
         assert_eq!(s.jerk_n, 49);
         assert_eq!(f.take_samples().len(), 5);
         assert!(f.is_empty());
+    }
+
+    #[test]
+    fn axle_errors_are_those_of_the_fixed_points() {
+        // On the centreline, yawed by 0.1 rad: the rear axle is on the path,
+        // the front axle (wheelbase 2.6 m ahead) 2.6 sin(0.1) m to the left,
+        // the control point P(0.5) half of that.
+        let (mut f, t) = fleet_on(road(None, true));
+        let mut s0 = at(50.0, 10.0);
+        s0.theta_rad = 0.1;
+        let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        step(&mut f, &[a], false);
+        let s = f.remove_vehicle(a).unwrap();
+        let front = 2.6 * 0.1_f64.sin();
+        assert!(s.sum_abs_e_rear < 1e-9, "{}", s.sum_abs_e_rear);
+        assert!((s.sum_abs_e_front - front).abs() < 1e-9, "{}", s.sum_abs_e_front);
+        assert!((s.sum_abs_e - 0.5 * front).abs() < 1e-9, "{}", s.sum_abs_e);
     }
 
     #[test]
