@@ -189,10 +189,12 @@ def plot_metric(manifest: dict[str, Any], ok: pd.DataFrame, metric: str, dims: S
     for k in range(n, rows * cols):
         axes[k // cols][k % cols].set_visible(False)
     seeds = ok["seed"].nunique()
-    fig.suptitle(f"{metric}: mean and 95% CI over {seeds} seed{'s' if seeds != 1 else ''}", fontsize=10)
+    # Two lines: a long metric name on one line with the rest overflowed a
+    # one-panel figure.
+    fig.suptitle(f"{metric}\nmean and 95% CI over {seeds} seed{'s' if seeds != 1 else ''}", fontsize=10)
     # Fixed margins: tight_layout would draw every figure twice (a third of the report's time).
     width, height = 4.6 * cols, 3.4 * rows
-    fig.subplots_adjust(left=0.8 / width, right=1 - 0.15 / width, bottom=0.5 / height, top=1 - 0.45 / height,
+    fig.subplots_adjust(left=0.8 / width, right=1 - 0.15 / width, bottom=0.5 / height, top=1 - 0.6 / height,
                         wspace=0.35, hspace=0.45)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=90)
