@@ -118,6 +118,17 @@ impl Fleet {
         self.inner.n_tracks()
     }
 
+    /// Threads a step of many vehicles is split over: 0 (the default) for
+    /// one per core, 1 to stay on the calling thread.
+    #[getter]
+    fn threads(&self) -> usize {
+        self.inner.threads()
+    }
+    #[setter]
+    fn set_threads(&mut self, threads: usize) {
+        self.inner.set_threads(threads);
+    }
+
     fn __len__(&self) -> usize {
         self.inner.len()
     }

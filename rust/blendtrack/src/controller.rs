@@ -120,18 +120,6 @@ impl Controller {
         self.hint_cp = None;
     }
 
-    /// Front-axle projection; its curvature is only used (by the reverse
-    /// Stanley feed-forward) when driving backwards.
-    fn project_front(&mut self, front_pt: &Point2<f64>) -> crate::path::Projection {
-        let path = &self.track.path;
-        let mut front = path.project_with_no_curvature(front_pt, self.hint_front);
-        if self.cfg.direction == crate::vehicle::Direction::Backward {
-            front.curvature_per_m = path.curvature_at(front.s);
-        }
-        self.hint_front = Some(front.s);
-        front
-    }
-
     /// One step with the configured blend factor.
     pub fn step(
         &mut self,
@@ -177,7 +165,10 @@ impl Controller {
                 message: "must be in [0, 1]",
             });
         }
-        let track = self.track.clone();
+        // Borrowed, not cloned: an Arc clone per step is an atomic write to
+        // a counter every vehicle on the track shares, which makes threads
+        // stepping vehicles of one track fight over its cache line.
+        let track: &Track = &self.track;
         let path = &track.path;
         let e = self.gains.wheelbase_m;
         let dir = self.cfg.direction;
@@ -189,7 +180,13 @@ impl Controller {
         let rear = path.project_with_no_curvature(&rear_pt, self.hint_rear);
         self.hint_rear = Some(rear.s);
         // Every controller projects the front axle: its error is reported.
-        let front = self.project_front(&front_pt);
+        // Its curvature is only used (by the reverse Stanley feed-forward)
+        // when driving backwards.
+        let mut front = path.project_with_no_curvature(&front_pt, self.hint_front);
+        if dir == crate::vehicle::Direction::Backward {
+            front.curvature_per_m = path.curvature_at(front.s);
+        }
+        self.hint_front = Some(front.s);
         let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
             LateralKind::Blend => {
                 let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
@@ -227,7 +224,7 @@ impl Controller {
 
         // Crossings beyond the relevance distance cannot change the command.
         let horizon = self.cfg.ray_horizon_m.min(
-            relevance_distance(speed, &self.cfg) + 2.0 * self.track.corridor.max_width() + 5.0,
+            relevance_distance(speed, &self.cfg) + 2.0 * track.corridor.max_width() + 5.0,
         );
         let d_obs = self
             .track

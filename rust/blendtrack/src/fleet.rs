@@ -174,11 +174,22 @@ pub struct Fleet {
     /// Per-slot "seen in this step" marks, kept to avoid a per-step allocation.
     seen: Vec<u32>,
     epoch: u32,
+    /// Threads a large step is split over (0: one per core, up to `MAX_THREADS`).
+    threads: usize,
 }
 
 impl Fleet {
     pub fn new() -> Self {
         Self::default()
+    }
+
+    /// Threads a step of at least `PARALLEL_MIN_VEHICLES` vehicles is split
+    /// over: 0 (the default) for one per core, 1 to stay on the calling thread.
+    pub fn set_threads(&mut self, threads: usize) {
+        self.threads = threads;
+    }
+    pub fn threads(&self) -> usize {
+        self.threads
     }
 
     /// Registers a track; `config` builds its corridor and is the default
@@ -399,12 +410,14 @@ impl Fleet {
             })
             .collect();
         let mut rows = vec![Row::default(); n];
-        let threads = if n >= PARALLEL_MIN_VEHICLES {
+        let threads = if n < PARALLEL_MIN_VEHICLES {
+            1
+        } else if self.threads > 0 {
+            self.threads.min(MAX_THREADS)
+        } else {
             std::thread::available_parallelism()
                 .map_or(1, |p| p.get())
                 .min(MAX_THREADS)
-        } else {
-            1
         };
         if threads <= 1 {
             for (i, (e, row)) in entries.iter_mut().zip(rows.iter_mut()).enumerate() {
@@ -452,7 +465,7 @@ impl Fleet {
 }
 
 /// Below this many vehicles a step runs on the calling thread only.
-const PARALLEL_MIN_VEHICLES: usize = 2048;
+const PARALLEL_MIN_VEHICLES: usize = 1024;
 const MAX_THREADS: usize = 8;
 
 /// One vehicle's outputs.
