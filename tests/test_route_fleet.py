@@ -21,7 +21,8 @@ def _fleet() -> tuple[RouteFleet, int]:
         None,
         piece_start_m=[0.0, 100.0],
         piece_scale=[1.0, 1.0],
-        piece_plain=[1, 1],
+        piece_offset_m=[0.0, 0.0],
+        piece_lane_length_m=[100.0, 200.0],
         piece_speed_mps=[15.0, 15.0],
         piece_lane=[0, 1],
         piece_edge=[0, 1],
@@ -37,8 +38,8 @@ def _fleet() -> tuple[RouteFleet, int]:
     return f, track
 
 
-def _add(f: RouteFleet, track: int, x: float, v: float) -> int:
-    return f.add_vehicle(track, None, None, reach_m=3.5, length_m=4.5, min_gap_m=2.5, x=x, y=0.0, theta=0.0, v=v)
+def _add(f: RouteFleet, track: int, x: float, v: float, name: str | None = None) -> int:
+    return f.add_vehicle(track, None, None, reach_m=3.5, length_m=4.5, min_gap_m=2.5, x=x, y=0.0, theta=0.0, v=v, name=name)
 
 
 def _step(f: RouteFleet, slots: list[int]) -> dict[str, np.ndarray]:
@@ -54,7 +55,8 @@ def test_red_light_holds_the_vehicle_and_moves_are_lane_moves() -> None:
     f.set_signal(0, "r")
     for _ in range(300):
         out = _step(f, [slot])
-    assert out["move"][0] == 1 and out["lane"][0] == 0
+    # Standing at the line: by lane (speed only, or nothing to send).
+    assert out["move"][0] in (0, 4) and out["lane"][0] == 0 and out["sumo_speed_mps"][0] < 0.05
     assert 95.0 < f.s_front(slot) < 100.0
     assert f.stats(slot)["red_light_violations"] == 0
     f.set_signal(0, "G")
@@ -74,8 +76,8 @@ def test_red_light_holds_the_vehicle_and_moves_are_lane_moves() -> None:
         (lambda f, t, s: f.retrack(s, 99), "track"),
         (lambda f, t, s: _add(f, t, math.nan, 1.0), "finite"),
         (lambda f, t, s: f.set_signal(1 << 21, "r"), "light"),
-        (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0, -1.0], piece_scale=[1.0, 1.0], piece_plain=[1, 1], piece_speed_mps=[1.0, 1.0], piece_lane=[0, 0], piece_edge=[0, 0], piece_lane_index=[0, 0], length_m=1.0), "piece 1"),
-        (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0], piece_scale=[1.0], piece_plain=[1], piece_speed_mps=[1.0], piece_lane=[-3], piece_edge=[0], piece_lane_index=[0], length_m=1.0), "piece_lane"),
+        (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0, -1.0], piece_scale=[1.0, 1.0], piece_offset_m=[0.0, 0.0], piece_lane_length_m=[1.0, 1.0], piece_speed_mps=[1.0, 1.0], piece_lane=[0, 0], piece_edge=[0, 0], piece_lane_index=[0, 0], length_m=1.0), "piece 1"),
+        (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0], piece_scale=[1.0], piece_offset_m=[0.0], piece_lane_length_m=[1.0], piece_speed_mps=[1.0], piece_lane=[-3], piece_edge=[0], piece_lane_index=[0], length_m=1.0), "piece_lane"),
     ],
 )
 def test_bad_calls_raise_input_error_and_leave_the_fleet_usable(call, match) -> None:  # type: ignore[no-untyped-def]
@@ -87,6 +89,61 @@ def test_bad_calls_raise_input_error_and_leave_the_fleet_usable(call, match) -> 
     assert out["move"][0] == 1 and len(f) == 1
 
 
+def test_plan_sumo_reads_getleader_tuples_and_asks_for_background_speeds() -> None:
+    f, track = _fleet()
+    lead = _add(f, track, 60.0, 12.0, name="car.0")
+    fol = _add(f, track, 40.0, 12.0, name="car.1")
+    solo = _add(f, track, 10.0, 12.0, name="car.2")
+    asked: list[str] = []
+
+    def speed_of(vid: str) -> float:
+        asked.append(vid)
+        return 3.0
+
+    slots = [lead, fol, solo]
+    nan = [math.nan] * 3
+    # car.0 follows a background vehicle; car.1 follows car.0 (known here,
+    # so its speed is blendtrack's); car.2 has none ("" as SUMO says).
+    f.plan_sumo(slots, [("truck.7", 20.0), ("car.0", 12.0), ("", -1.0)], speed_of)
+    out = f.step([], 0.1)
+    assert asked == ["truck.7"]
+    # Against the same leaders given to plan(): the same commands.
+    g, track2 = _fleet()
+    for x in (60.0, 40.0, 10.0):
+        _add(g, track2, x, 12.0)
+    g.plan(slots, [20.0, 12.0, math.nan], [-1, lead, -1], [3.0, math.nan, math.nan], [-1] * 3, nan)
+    ref = g.step([], 0.1)
+    assert np.array_equal(out["accel_mps2"], ref["accel_mps2"])
+    assert out["accel_mps2"][0] < out["accel_mps2"][2], "the slow background leader brakes car.0"
+    # A name is one vehicle's; once removed it is free again.
+    with pytest.raises(blendtrack.InputError, match="car.1"):
+        _add(f, track, 90.0, 1.0, name="car.1")
+    f.remove_vehicle(fol)
+    _add(f, track, 90.0, 1.0, name="car.1")
+
+
+@pytest.mark.parametrize(
+    "leaders, match",
+    [([("a", 1.0)], "has 1 entries, expected 2"), ([7, None], r"leaders\[0\]"), ([("a", "far"), None], "gap"), ([(1, 2.0), None], "id"), ([("a",), None], "items")],
+)
+def test_plan_sumo_rejects_malformed_leaders(leaders, match) -> None:  # type: ignore[no-untyped-def]
+    f, track = _fleet()
+    s = [_add(f, track, 40.0, 10.0), _add(f, track, 20.0, 10.0)]
+    with pytest.raises(blendtrack.InputError, match=match):
+        f.plan_sumo(s, leaders, lambda vid: 0.0)
+    f.plan_sumo(s, [None, None], lambda vid: 0.0, [1], [0], [3.0])
+    assert len(f.step([], 0.1)["move"]) == 2
+
+
 def test_bad_settings_are_config_errors() -> None:
     with pytest.raises(blendtrack.ConfigError, match="comfort_lateral_accel_mps2"):
         RouteFleet(comfort_lateral_accel_mps2=-1.0)
+
+
+def test_plan_sumo_sparse_reads_must_index_the_slots() -> None:
+    f, track = _fleet()
+    s = [_add(f, track, 40.0, 10.0)]
+    with pytest.raises(blendtrack.InputError, match=r"read_index\[0\] = 3"):
+        f.plan_sumo(s, [None], lambda vid: 0.0, [3], [0], [1.0])
+    with pytest.raises(blendtrack.InputError, match="read_pos"):
+        f.plan_sumo(s, [None], lambda vid: 0.0, [0], [0], [])

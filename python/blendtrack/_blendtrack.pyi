@@ -5,6 +5,7 @@ Keep in step with the module: scripts/test runs
 """
 
 import os
+from collections.abc import Callable, Sequence
 from typing import Any, final
 
 import numpy as np
@@ -180,6 +181,10 @@ class Fleet:
     def slots(self) -> npt.NDArray[np.int64]: ...
     @property
     def n_tracks(self) -> int: ...
+    @property
+    def threads(self) -> int: ...
+    @threads.setter
+    def threads(self, threads: int) -> None: ...
     def __len__(self) -> int: ...
     def step(
         self,
@@ -211,6 +216,7 @@ class RouteFleet:
         lane_move_heading_deg: float = 2.0,
         comfort_lateral_accel_mps2: float = 2.0,
         sample_every: int = 10,
+        verify_every: int = 10,
     ) -> RouteFleet: ...
     def add_route(
         self,
@@ -219,12 +225,14 @@ class RouteFleet:
         *,
         piece_start_m: _ArrayLike,
         piece_scale: _ArrayLike,
-        piece_plain: _ArrayLike,
+        piece_offset_m: _ArrayLike,
+        piece_lane_length_m: _ArrayLike,
         piece_speed_mps: _ArrayLike,
         piece_lane: _ArrayLike,
         piece_edge: _ArrayLike,
         piece_lane_index: _ArrayLike,
         length_m: float,
+        piece_lane_pos_m: _ArrayLike | None = None,
         stop_s_m: _ArrayLike | None = None,
         stop_light: _ArrayLike | None = None,
         stop_link: _ArrayLike | None = None,
@@ -247,6 +255,7 @@ class RouteFleet:
         theta: float,
         v: float,
         delta: float = 0.0,
+        name: str | None = None,
     ) -> int: ...
     def retrack(self, slot: int, track_id: int) -> None: ...
     def remove_vehicle(self, slot: int) -> dict[str, float]: ...
@@ -267,10 +276,23 @@ class RouteFleet:
         lane: _ArrayLike,
         lane_pos: _ArrayLike,
     ) -> npt.NDArray[np.int64]: ...
+    def plan_sumo(
+        self,
+        slots: _ArrayLike,
+        leaders: Sequence[tuple[str, float] | None],
+        speed_of: Callable[[str], float],
+        read_index: _ArrayLike | None = None,
+        read_lane: _ArrayLike | None = None,
+        read_pos: _ArrayLike | None = None,
+    ) -> npt.NDArray[np.int64]: ...
     def step(self, must_yield: _ArrayLike, dt: float) -> dict[str, npt.NDArray[Any]]: ...
     def take_samples(self) -> npt.NDArray[np.float64]: ...
     @property
     def n_tracks(self) -> int: ...
+    @property
+    def threads(self) -> int: ...
+    @threads.setter
+    def threads(self, threads: int) -> None: ...
     def __len__(self) -> int: ...
 
 def stopping_accel(v_mps: float, gap_m: float, v_l_mps: float, s0_m: float, tau_s: float, b_f_mps2: float, b_l_mps2: float) -> float: ...

@@ -27,7 +27,6 @@ controllers.
 
 from __future__ import annotations
 
-import bisect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -36,6 +35,14 @@ from typing import Any
 import numpy as np
 
 from blendtrack import PathError
+
+#: Track points within this distance (m) of their lane's centreline count as
+#: near it (on a curve of radius R the smoothing alone moves the track about
+#: ``smoothing_m**2 / (2 R)`` inward: 4 cm at R = 30 m); stretches of a piece
+#: near and away from it (kinks at lane joints) become pieces of their own,
+#: at least this many points long.
+NEAR_LANE_M = 0.06
+MIN_RUN_PTS = 4
 
 
 @dataclass
@@ -55,13 +62,19 @@ class RouteGeometry:
     piece_index: list[int]
     #: Speed limit of each piece (m/s).
     piece_speed: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    #: SUMO's lane length over the piece's geometric length: maps an arc
-    #: length inside a piece to SUMO's lane position.
+    #: SUMO's lane position where the piece starts (0 unless the piece
+    #: starts inside its lane, after a lane change), and SUMO's lane position
+    #: per metre of track over the piece: a position on the track maps to
+    #: ``lane_pos + (s - start) * scale`` on the piece's lane.
+    piece_lane_pos: np.ndarray = field(default_factory=lambda: np.zeros(0))
     piece_scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    #: True where the piece follows its SUMO lane's centreline exactly
-    #: (a normal lane, not a junction lane nor a lane change), so that a
-    #: position on it can be given to SUMO as (lane, position).
-    piece_plain: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    #: SUMO's length of each piece's lane (m).
+    piece_lane_length: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: Largest distance (m) between the track and the piece's SUMO lane
+    #: centreline (the smoothing rounds the kinks where lanes meet); +inf
+    #: where the track crosses between lanes (a lane change). Near the
+    #: centreline a vehicle can be handed to SUMO as (lane, position).
+    piece_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: Junction entries along the track, sorted by arc length: (arc length of
     #: the stop line, traffic light id or "" when unsignalised, link index,
     #: True when the link has priority by the network (state "M"), the first
@@ -78,28 +91,20 @@ class RouteGeometry:
     #: Total arc length (m).
     length_m: float = 0.0
 
-    def __post_init__(self) -> None:
-        # Plain-list copies for the per-vehicle, per-step look-ups of the
-        # SUMO runner (bisect on a list beats a numpy call on small arrays).
-        self.starts: list[float] = [float(x) for x in self.piece_start_s]
-        self.speeds: list[float] = [float(x) for x in self.piece_speed]
-        self.scales: list[float] = [float(x) for x in self.piece_scale]
-        self.plains: list[bool] = [bool(x) for x in self.piece_plain]
 
-    def piece_index_at(self, s: float) -> int:
-        """Index of the piece holding arc length ``s`` (clamped to the pieces)."""
-        return min(max(bisect.bisect_right(self.starts, s) - 1, 0), len(self.starts) - 1)
+def _arc(shape: np.ndarray) -> np.ndarray:
+    """Cumulative arc length at each point of a polyline."""
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(shape, axis=0).T))])
 
 
 def _resample(shape: np.ndarray, spacing_m: float) -> np.ndarray:
-    """Points along ``shape`` at most ``spacing_m`` apart, keeping its vertices."""
-    out = [shape[:1]]
-    for a, b in zip(shape[:-1], shape[1:]):
-        seg = float(np.hypot(*(b - a)))
-        n = max(1, int(np.ceil(seg / spacing_m)))
-        t = (np.arange(1, n + 1) / n)[:, None]
-        out.append(a + t * (b - a))
-    return np.concatenate(out)
+    """Points evenly spaced along ``shape``, at most ``spacing_m`` apart, from
+    its first point to its last (even spacing keeps the smoothing, which
+    counts in points, the same everywhere along the track)."""
+    s = _arc(shape)
+    n = max(1, int(np.ceil(s[-1] / spacing_m)))
+    t = np.linspace(0.0, s[-1], n + 1)
+    return np.column_stack([np.interp(t, s, shape[:, 0]), np.interp(t, s, shape[:, 1])])
 
 
 def _best_connection(conns: list[Any]) -> Any:
@@ -127,26 +132,6 @@ def _smoothstep(u: np.ndarray) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u)
 
 
-def _lane_change_shape(
-    a: Any, b: Any, spacing_m: float, start_m: float | None = None, length_m: float | None = None
-) -> np.ndarray:
-    """Points that move smoothly (smoothstep) from lane ``a``'s centreline to
-    lane ``b``'s (two lanes of one edge), between ``start_m`` and
-    ``start_m + length_m`` along ``a`` (default: over the whole edge)."""
-    sa = _resample(np.asarray(a.getShape(), dtype=float), spacing_m)
-    sb = np.asarray(b.getShape(), dtype=float)
-    # Sample b at the same relative arc length as each point of a.
-    da = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sa, axis=0).T))])
-    db = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(sb, axis=0).T))])
-    total = max(da[-1], 1e-9)
-    tb = da / total * db[-1]
-    pb = np.column_stack([np.interp(tb, db, sb[:, 0]), np.interp(tb, db, sb[:, 1])])
-    start = 0.0 if start_m is None else min(max(start_m, 0.0), total)
-    length = (total - start) if length_m is None else max(length_m, 1e-6)
-    w = _smoothstep((da - start) / length)[:, None]
-    return (1.0 - w) * sa + w * pb
-
-
 @dataclass
 class _Piece:
     shape: np.ndarray
@@ -155,10 +140,72 @@ class _Piece:
     index: int
     lane: str
     speed_mps: float
+    #: SUMO's length of the lane.
     length_m: float
-    plain: bool
+    #: Arc length along the SUMO lane's own shape at each point of ``shape``
+    #: (where the points lie on it) or of the point abreast of it.
+    lane_s: np.ndarray
+    #: Geometric length of the SUMO lane's shape (SUMO's lane position is
+    #: ``lane_s * length_m / shape_length_m``).
+    shape_length_m: float
+    #: False where the points leave the lane's centreline (the middle of a lane change).
+    on_lane: bool = True
     #: (traffic light id or "", link index, major) when this piece enters a junction.
     tls: tuple[str, int, bool] | None = None
+
+
+def _lane_piece(
+    lane: Any, spacing_m: float, shape: np.ndarray | None = None, lane_s: np.ndarray | None = None, on_lane: bool = True
+) -> _Piece:
+    """A piece on ``lane``: its whole resampled centreline (``shape`` None),
+    or the given points with their arc lengths along the lane's shape."""
+    raw = np.asarray(lane.getShape(), dtype=float)
+    if shape is None or lane_s is None:
+        shape = _resample(raw, spacing_m)
+        lane_s = _arc(shape)
+    return _Piece(
+        shape,
+        0.5 * float(lane.getWidth()),
+        lane.getEdge().getID(),
+        lane.getIndex(),
+        lane.getID(),
+        float(lane.getSpeed()),
+        float(lane.getLength()),
+        lane_s,
+        max(float(_arc(raw)[-1]), 1e-9),
+        on_lane,
+    )
+
+
+def _lane_change_pieces(
+    a: Any, b: Any, spacing_m: float, start_m: float | None = None, length_m: float | None = None
+) -> list[_Piece]:
+    """Points that move smoothly (smoothstep) from lane ``a``'s centreline to
+    lane ``b``'s (two lanes of one edge), between ``start_m`` and
+    ``start_m + length_m`` along ``a`` (default: over the whole edge), as up
+    to three pieces: on ``a`` before the change, the change itself (off both
+    centrelines; on ``b`` for SUMO), on ``b`` after it."""
+    sa = _resample(np.asarray(a.getShape(), dtype=float), spacing_m)
+    sb = np.asarray(b.getShape(), dtype=float)
+    # Sample b at the same relative arc length as each point of a.
+    da, db = _arc(sa), _arc(sb)
+    total = max(da[-1], 1e-9)
+    tb = da / total * db[-1]
+    pb = np.column_stack([np.interp(tb, db, sb[:, 0]), np.interp(tb, db, sb[:, 1])])
+    start = 0.0 if start_m is None else min(max(start_m, 0.0), total)
+    length = (total - start) if length_m is None else max(length_m, 1e-6)
+    w = _smoothstep((da - start) / length)
+    pts = (1.0 - w[:, None]) * sa + w[:, None] * pb
+    before, after = w <= 0.0, w >= 1.0
+    middle = ~(before | after)
+    out = []
+    if before.any():
+        out.append(_lane_piece(a, spacing_m, pts[before], da[before]))
+    if middle.any():
+        out.append(_lane_piece(b, spacing_m, pts[middle], tb[middle], on_lane=False))
+    if after.any():
+        out.append(_lane_piece(b, spacing_m, pts[after], tb[after]))
+    return out
 
 
 def _pieces(
@@ -199,20 +246,8 @@ def _pieces(
             if any(c.getToLane().getID() in no_change[k + 1] for c in conns_to(ln, k + 1)):
                 no_change[k].add(ln.getID())
 
-    def piece(lane: Any, shape: np.ndarray | None = None) -> _Piece:
-        plain = shape is None
-        if shape is None:
-            shape = _resample(np.asarray(lane.getShape(), dtype=float), spacing_m)
-        return _Piece(
-            shape,
-            0.5 * float(lane.getWidth()),
-            lane.getEdge().getID(),
-            lane.getIndex(),
-            lane.getID(),
-            float(lane.getSpeed()),
-            float(lane.getLength()),
-            plain,
-        )
+    def piece(lane: Any) -> _Piece:
+        return _lane_piece(lane, spacing_m)
 
     out: list[_Piece] = []
     lane = objs[0].getLane(min(max(start_index, 0), objs[0].getLaneNumber() - 1))
@@ -231,12 +266,12 @@ def _pieces(
             best = [ln for ln in able if ln.getID() in no_change[k]] or able
             target = min(best, key=lambda ln: abs(ln.getIndex() - lane.getIndex()))
             if k == 0 and change is not None:
-                out.append(piece(target, _lane_change_shape(lane, target, spacing_m, change[0], change[1])))
+                out.extend(_lane_change_pieces(lane, target, spacing_m, change[0], change[1]))
             elif defer_changes:
                 out.append(piece(lane))
                 return out, (k, target.getIndex())
             else:
-                out.append(piece(target, _lane_change_shape(lane, target, spacing_m)))
+                out.extend(_lane_change_pieces(lane, target, spacing_m))
             lane = target
             cs = conns_to(lane, k + 1)
         else:
@@ -259,6 +294,19 @@ def _pieces(
         out.extend(vias)
         lane = c.getToLane()
     return out, None
+
+
+def _runs(far: np.ndarray, min_len: int) -> list[tuple[int, int]]:
+    """[a, b) ranges of equal ``far``, covering it in order, after a stretch
+    of near points shorter than ``min_len`` is counted as far (a piece only
+    gets cheap moves where it is near for a while)."""
+    far = far.copy()
+    cuts = [0, *(np.flatnonzero(far[1:] != far[:-1]) + 1).tolist(), len(far)]
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        if not far[a] and b - a < min_len:
+            far[a:b] = True
+    cuts = [0, *(np.flatnonzero(far[1:] != far[:-1]) + 1).tolist(), len(far)]
+    return list(zip(cuts[:-1], cuts[1:]))
 
 
 def _smooth(points: np.ndarray, sigma_pts: float) -> np.ndarray:
@@ -301,23 +349,37 @@ def route_geometry(
     wid: list[np.ndarray] = []
     starts: list[float] = []
     kept: list[_Piece] = []
+    #: Per kept piece: the range of its points in the concatenated track
+    #: (from the point it shares with the piece before, where its lane
+    #: starts, if any), and their arc lengths along the lane's shape.
+    first: list[int] = []
+    end: list[int] = []
+    lane_s: list[np.ndarray] = []
     stops: list[tuple[float, str, int, bool, str, float]] = []
-    geo_len: list[float] = []
     s = 0.0
+    n_pts = 0
     last: np.ndarray | None = None
     pieces, pending = _pieces(net, edges, start_lane_index, spacing_m, defer_changes, change)
     for pc in pieces:
-        shape = pc.shape
-        if last is not None and np.hypot(*(shape[0] - last)) < 1e-6:
+        shape, ls = pc.shape, pc.lane_s
+        shared = last is not None and np.hypot(*(shape[0] - last)) < 1e-6
+        if shared:
             shape = shape[1:]
         if len(shape) == 0:
             continue
         # The stop line is where the incoming lane ends, before any gap to
         # the junction lane's first point (about 1 m in the urban grid).
         end_of_previous = s
+        if shared:
+            # The lane starts at the point it shares with the piece before.
+            starts.append(s)
+            first.append(n_pts - 1)
         if last is not None:
             s += float(np.hypot(*(shape[0] - last)))
-        starts.append(s)
+        if not shared:
+            starts.append(s)
+            first.append(n_pts)
+        lane_s.append(ls)
         kept.append(pc)
         if pc.tls is not None:
             stops.append((end_of_previous, pc.tls[0], pc.tls[1], pc.tls[2], pc.lane, math.inf))
@@ -328,25 +390,73 @@ def route_geometry(
                 if not math.isinf(stops[j][5]):
                     break
                 stops[j] = (*stops[j][:5], s)
-        d = np.diff(shape, axis=0)
-        seg = float(np.hypot(d[:, 0], d[:, 1]).sum())
-        geo_len.append(seg)
-        s += seg
+        s += float(_arc(shape)[-1])
         pts.append(shape)
         wid.append(np.full((len(shape), 2), pc.half_width_m))
+        n_pts += len(shape)
+        end.append(n_pts)
         last = shape[-1]
+    raw = np.concatenate(pts)
+    points = _smooth(raw, smoothing_m / spacing_m)
+    # Arc lengths on the smoothed track (the path the controllers follow):
+    # every arc length above is mapped through the points.
+    s_raw, s_sm = _arc(raw), _arc(points)
+
+    def smoothed(x: float) -> float:
+        return float(np.interp(x, s_raw, s_sm))
+
+    starts = [smoothed(x) for x in starts]
+
+    # Each piece is cut where the track comes near its lane's centreline or
+    # leaves it (the smoothing rounds the kinks at lane joints over a few
+    # metres): the runs near it can be handed to SUMO as (lane, position).
+    out: dict[str, list[Any]] = {k: [] for k in ("start", "k", "lane_pos", "scale", "offset")}
+    for k, pc in enumerate(kept):
+        i0, i1 = first[k], end[k]
+        # The smoothed point's offset from the raw one (which lies on the
+        # lane), across and along the lane's local direction.
+        r = raw[i0:i1]
+        tangent = np.gradient(r, axis=0) if len(r) > 1 else np.array([[1.0, 0.0]])
+        tangent /= np.maximum(np.hypot(*tangent.T), 1e-12)[:, None]
+        shift = points[i0:i1] - r
+        across = tangent[:, 0] * shift[:, 1] - tangent[:, 1] * shift[:, 0]
+        along = (tangent * shift).sum(axis=1)
+        pos = (lane_s[k] + along) * (pc.length_m / pc.shape_length_m)
+        dev = np.abs(across) if pc.on_lane else np.full(i1 - i0, math.inf)
+        for a, b in _runs(dev > NEAR_LANE_M, MIN_RUN_PTS):
+            # The run's points, and the one after it (the track between them is the run's too).
+            c = min(b + 1, i1 - i0)
+            ds = s_sm[i0 + c - 1] - s_sm[i0 + a]
+            rise = pos[c - 1] - pos[a]
+            scale = float(rise / ds) if ds > 1e-9 and rise > 0 else pc.length_m / pc.shape_length_m
+            start, lane_pos = (starts[k] if a == 0 else float(s_sm[i0 + a])), float(pos[a])
+            if a == 0 and lane_s[k][0] == 0.0:
+                # Where the lane starts, along the track (the smoothing shifts
+                # the points along a little): lane position 0 there, so a
+                # vehicle SUMO carries over the lane's start lands in place.
+                start, lane_pos = start - lane_pos / scale, 0.0
+                if out["start"]:
+                    start = max(start, out["start"][-1] + 1e-6)
+            out["start"].append(start)
+            out["k"].append(k)
+            out["lane_pos"].append(lane_pos)
+            out["scale"].append(scale)
+            out["offset"].append(float(dev[a:b].max()))
+    pieces_of = [kept[k] for k in out["k"]]
     return RouteGeometry(
-        points=_smooth(np.concatenate(pts), smoothing_m / spacing_m),
+        points=points,
         widths=np.concatenate(wid),
-        piece_start_s=np.asarray(starts),
-        piece_lane=[p.lane for p in kept],
-        piece_edge=[p.edge for p in kept],
-        piece_index=[p.index for p in kept],
-        piece_speed=np.array([p.speed_mps for p in kept]),
-        piece_scale=np.array([p.length_m / max(g, 1e-9) for p, g in zip(kept, geo_len)]),
-        piece_plain=np.array([p.plain for p in kept], dtype=bool),
-        length_m=s,
+        piece_start_s=np.array(out["start"]),
+        piece_lane=[p.lane for p in pieces_of],
+        piece_edge=[p.edge for p in pieces_of],
+        piece_index=[p.index for p in pieces_of],
+        piece_speed=np.array([p.speed_mps for p in pieces_of]),
+        piece_lane_pos=np.array(out["lane_pos"]),
+        piece_scale=np.array(out["scale"]),
+        piece_lane_length=np.array([p.length_m for p in pieces_of]),
+        piece_offset=np.array(out["offset"]),
+        length_m=float(s_sm[-1]),
         pending_change=pending,
-        stops=stops,
+        stops=[(smoothed(st[0]), st[1], st[2], st[3], st[4], smoothed(st[5]) if math.isfinite(st[5]) else st[5]) for st in stops],
         edges=tuple(edges),
     )

@@ -46,6 +46,7 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterable
+from itertools import repeat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -89,7 +90,7 @@ INTERNAL_YIELD_NEAR_M = 5.0
 _LIBSUMO_STARTED = False
 
 # RouteFleet move codes.
-_SPEED, _LANE, _XY, _INVALID = 0, 1, 2, 3
+_SPEED, _LANE, _XY, _INVALID, _HOLD = 0, 1, 2, 3, 4
 
 
 def _sumo_home() -> str:
@@ -266,8 +267,19 @@ class SumoRun:
         self._internal_vias: set[str] = set()
         self._conn_of_via: dict[str, Any] | None = None
         self._trace_rows: list[tuple[Any, ...]] = []
-        #: Vehicles whose SUMO lane position blendtrack does not know (read next step).
+        #: Vehicles whose SUMO lane position is read next step (unknown to
+        #: blendtrack, or due for a check of its prediction).
         self._read_position: set[str] = set()
+        #: The controlled vehicles in a fixed order (rebuilt when one comes or
+        #: goes), their ids, slots, and index by id: the hot loop's lists.
+        self._order: list[_Active] = []
+        self._ids: list[str] = []
+        self._slots = np.zeros(0, dtype=np.int64)
+        self._index: dict[str, int] = {}
+        self._order_dirty = True
+        #: The vehicles keeping a trajectory, and those changing lanes.
+        self._tracing: dict[str, _Active] = {}
+        self._changing: dict[str, _Active] = {}
         #: Vehicles where a lane change is due: (vid, lane, lane position, speed).
         self._lane_change_due: list[tuple[str, int, float, float]] = []
         self._steps = 0
@@ -275,10 +287,11 @@ class SumoRun:
         # crossings are summed from the records.
         self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
-        self.cheap_moves = 0
+        #: Moves by kind (see RouteFleet): speed only, nothing to send,
+        #: (lane, position), (x, y, angle).
+        self.moves = {"speed": 0, "none": 0, "lane": 0, "xy": 0}
         #: (time, vehicle, traffic light, link index, stop line arc length) of each red-light crossing.
         self.violations: list[tuple[Any, ...]] = []
-        self.xy_moves = 0
         self.sumo: Any = None
         self._tc: Any = None
         self._use_subscriptions = False
@@ -373,6 +386,33 @@ class SumoRun:
         for tls in lights:
             self.sumo.trafficlight.subscribe(tls, [tc.TL_RED_YELLOW_GREEN_STATE])
         self._has_tls = bool(lights)
+        self._bind_calls()
+
+    def _bind_calls(self) -> None:
+        """The per-vehicle SUMO calls of the hot loop. With libsumo, its SWIG
+        functions themselves: the Python wrappers around them add about a
+        third to each call (measured: setSpeed 405 vs 279 ns)."""
+        v = self.sumo.vehicle
+        raw: Any = None
+        if self.backend == "libsumo":
+            try:
+                from libsumo import _libsumo as raw
+            except ImportError:  # a libsumo built differently: its wrappers then
+                raw = None
+
+        def pick(name: str) -> Any:
+            f = getattr(raw, "vehicle_" + name, None)
+            return f if callable(f) else getattr(v, name)
+
+        self._get_leader = pick("getLeader")
+        self._get_speed = pick("getSpeed")
+        self._get_lane_id = pick("getLaneID")
+        self._get_lane_pos = pick("getLanePosition")
+        self._get_route_id = pick("getRouteID")
+        self._set_speed = pick("setSpeed")
+        self._move_to = pick("moveTo")
+        self._move_to_xy = pick("moveToXY")
+        self._lane_change_state = pick("getLaneChangeState")
 
     def _check_loads(self) -> None:
         import subprocess
@@ -494,7 +534,9 @@ class SumoRun:
                 self.base_config,
                 piece_start_m=geo.piece_start_s,
                 piece_scale=geo.piece_scale,
-                piece_plain=geo.piece_plain.astype(np.int64),
+                piece_offset_m=geo.piece_offset,
+                piece_lane_length_m=geo.piece_lane_length,
+                piece_lane_pos_m=geo.piece_lane_pos,
                 piece_speed_mps=geo.piece_speed,
                 piece_lane=[lanes.id(x) for x in geo.piece_lane],
                 piece_edge=[edge_ids.id(x) for x in geo.piece_edge],
@@ -540,13 +582,16 @@ class SumoRun:
             track, cfg, veh,
             reach_m=reach, length_m=info["length"], min_gap_m=info["min_gap"],
             x=x - reach * math.cos(theta), y=y - reach * math.sin(theta), theta=theta, v=float(v.getSpeed(vid)),
+            name=vid,
         )
         rec = VehicleRecord(vid=vid, vtype=vtype, depart_s=t)
         self.records.append(rec)
         act = _Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec)
-        if len(self._trajectories) + sum(a.trajectory is not None for a in self.active.values()) < self.opt.keep_trajectories or self.opt.keep_trajectories < 0:
+        if len(self._trajectories) + len(self._tracing) < self.opt.keep_trajectories or self.opt.keep_trajectories < 0:
             act.trajectory = []
+            self._tracing[vid] = act
         self.active[vid] = act
+        self._order_dirty = True
         self._read_position.add(vid)
         v.setSpeedMode(vid, 0)
         v.setLaneChangeMode(vid, 0)
@@ -560,6 +605,9 @@ class SumoRun:
         self._read_position.discard(vid)
         if act is None:
             return
+        self._order_dirty = True
+        self._tracing.pop(vid, None)
+        self._changing.pop(vid, None)
         rec = act.record
         for key, value in self.fleet.remove_vehicle(act.slot).items():
             setattr(rec, key, value)
@@ -615,8 +663,10 @@ class SumoRun:
             "wall_time_s": wall,
             "steps_per_second": steps / wall if wall > 0 else math.nan,
             "comfort_lateral_accel_mps2": self.scenario.comfort_lateral_accel_mps2,
-            "moves_lane_position": self.cheap_moves,
-            "moves_xy": self.xy_moves,
+            "moves_speed_only": self.moves["speed"],
+            "moves_none": self.moves["none"],
+            "moves_lane_position": self.moves["lane"],
+            "moves_xy": self.moves["xy"],
             "reroutes": self.counts["reroutes"],
             "lane_changes_aborted": self.counts["lane_changes_aborted"],
         }
@@ -690,83 +740,88 @@ class SumoRun:
             bar.close()
         return steps
 
-    def _observe(self, t: float) -> tuple[list[str], list[_Active], list[Any]]:
-        """Leaders, and where needed lane positions, of every controlled vehicle
-        still in the simulation; drops the ones that vanished without an event.
+    def _refresh_order(self) -> None:
+        if self._order_dirty:
+            self._order = list(self.active.values())
+            self._ids = [a.vid for a in self._order]
+            self._slots = np.array([a.slot for a in self._order], dtype=np.int64)
+            self._index = {vid: i for i, vid in enumerate(self._ids)}
+            self._order_dirty = False
+
+    def _observe(self, t: float) -> tuple[list[Any], list[int], list[int], list[float]]:
+        """Leaders, and where needed lane positions, of every controlled
+        vehicle still in the simulation, in ``self._order``; drops the ones
+        that vanished without an event.
 
         Over TraCI these come from vehicle subscriptions (one socket round trip
         for all). With libsumo 1.28 a vehicle subscription breaks every later
         ``simulationStep`` ("Vehicle 'x' is not known") once another client
         removes the subscribed vehicle, so there the same values come from
-        in-process getters (about a microsecond each), and only the ones
-        needed: the leader every step, the lane position only where blendtrack
-        does not know it, the route id every ``ROUTE_CHECK_EVERY`` steps.
+        in-process getters (under a microsecond each), and only the ones
+        needed: the leader every step, the lane position where RouteFleet asks
+        for it (unknown, or due for a check), the route id every
+        ``ROUTE_CHECK_EVERY`` steps.
         """
-        v = self.sumo.vehicle
-        tc = self._tc
-        active = self.active
-        ids: list[str] = []
-        acts: list[_Active] = []
-        gaps: list[float] = []
-        lslots: list[int] = []
-        lspeeds: list[float] = []
-        lanes: list[int] = []
-        poss: list[float] = []
-        nan = math.nan
-        lane_id = self._lanes.get
-        read = self._read_position
         if self._use_subscriptions:
-            res = v.getAllSubscriptionResults()
-        else:
-            present = set(v.getIDList())
-            check = self._steps % ROUTE_CHECK_EVERY
-            get_leader = v.getLeader
-        for vid, act in list(active.items()):
-            if self._use_subscriptions:
-                r = res.get(vid)
-                if r is None:
-                    lead = None
-                else:
-                    if r.get(tc.VAR_ROUTE_ID, act.route_id) != act.route_id:
-                        self._rebuild(act)
-                    lead = r.get(tc.VAR_LEADER)
-                    lane, pos = lane_id(r.get(tc.VAR_LANE_ID, ""), -1), float(r.get(tc.VAR_LANEPOSITION, nan))
-            else:
-                r = vid in present
-                if r:
-                    if act.slot % ROUTE_CHECK_EVERY == check and v.getRouteID(vid) != act.route_id:
-                        self._rebuild(act)
-                    lead = get_leader(vid, LEADER_RANGE_M)
-                    if vid in read:
-                        lane, pos = lane_id(v.getLaneID(vid), -1), v.getLanePosition(vid)
-                    else:
-                        lane, pos = -1, nan
-            if not r:
-                # Removed by another client (or otherwise gone) without an event.
+            return self._observe_subscribed(t)
+        self._refresh_order()
+        ids = self._ids
+        try:
+            leaders = list(map(self._get_leader, ids, repeat(LEADER_RANGE_M, len(ids))))
+        except Exception:
+            # Removed by another client (or otherwise gone) without an event.
+            present = set(self.sumo.vehicle.getIDList())
+            for vid in [x for x in ids if x not in present]:
                 self.counts["vanished"] += 1
                 self._drop(vid, t, "vanished")
-                continue
-            if act.changing is not None:
-                lead = self._changing_leader(act, lead)
-            ids.append(vid)
-            acts.append(act)
-            lanes.append(lane)
-            poss.append(pos)
-            if lead and lead[0] and lead[1] >= -100.0:
-                lid, gap = lead
-                gaps.append(gap)
-                other = active.get(lid)
-                if other is not None:
-                    lslots.append(other.slot)
-                    lspeeds.append(nan)
-                else:
-                    lslots.append(-1)
-                    lspeeds.append(v.getSpeed(lid))
-            else:
-                gaps.append(nan)
-                lslots.append(-1)
-                lspeeds.append(nan)
-        return ids, acts, [gaps, lslots, lspeeds, lanes, poss]
+            self._refresh_order()
+            ids = self._ids
+            leaders = list(map(self._get_leader, ids, repeat(LEADER_RANGE_M, len(ids))))
+        get_route = self._get_route_id
+        for act in self._order[self._steps % ROUTE_CHECK_EVERY :: ROUTE_CHECK_EVERY]:
+            if get_route(act.vid) != act.route_id:
+                self._rebuild(act)
+        index, lane_id = self._index, self._lanes.id
+        get_lane, get_pos = self._get_lane_id, self._get_lane_pos
+        read = [(i, vid) for vid in self._read_position if (i := index.get(vid)) is not None]
+        lanes = [lane_id(get_lane(vid)) for _, vid in read]
+        poss = [get_pos(vid) for _, vid in read]
+        self._changing_leaders(leaders)
+        return leaders, [i for i, _ in read], lanes, poss
+
+    def _observe_subscribed(self, t: float) -> tuple[list[Any], list[int], list[int], list[float]]:
+        """``_observe`` over TraCI: everything from the vehicle subscriptions."""
+        tc = self._tc
+        res = self.sumo.vehicle.getAllSubscriptionResults()
+        self._refresh_order()
+        for act in list(self._order):
+            r = res.get(act.vid)
+            if r is None:
+                self.counts["vanished"] += 1
+                self._drop(act.vid, t, "vanished")
+            elif r.get(tc.VAR_ROUTE_ID, act.route_id) != act.route_id:
+                self._rebuild(act)
+        self._refresh_order()
+        lane_id = self._lanes.id
+        rows = [res[vid] for vid in self._ids]
+        leaders = [r.get(tc.VAR_LEADER) for r in rows]
+        lanes = [lane_id(r.get(tc.VAR_LANE_ID, "")) for r in rows]
+        poss = [float(r.get(tc.VAR_LANEPOSITION, math.nan)) for r in rows]
+        self._changing_leaders(leaders)
+        return leaders, list(range(len(rows))), lanes, poss
+
+    def _changing_leaders(self, leaders: list[Any]) -> None:
+        index = self._index
+        for act in list(self._changing.values()):
+            i = index[act.vid]
+            leaders[i] = self._changing_leader(act, leaders[i])
+
+    def _set_changing(self, act: _Active, changing: tuple[int, int] | None) -> None:
+        act.changing = changing
+        if changing is None:
+            self._changing.pop(act.vid, None)
+        else:
+            self._changing[act.vid] = act
 
     def _changing_leader(self, act: _Active, lead: Any) -> Any:
         """During a lane change SUMO reports the leader on the lane the vehicle
@@ -775,7 +830,7 @@ class SumoRun:
         v = self.sumo.vehicle
         direction, target = act.changing  # type: ignore[misc]
         if v.getLaneIndex(act.vid) == target:
-            act.changing = None
+            self._set_changing(act, None)
             return lead
         if abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M:
             # Barely started (or held at its start by a leader): the room
@@ -804,73 +859,75 @@ class SumoRun:
         self._lane_change_due = []
         if self._has_tls:
             self._refresh_tls()
-        ids, acts, obs = self._observe(t)
-        if not ids:
+        leaders, read, lanes, poss = self._observe(t)
+        if not self._ids:
             return
-        fleet = self.fleet
-        slots = [a.slot for a in acts]
-        queries = fleet.plan(slots, *obs).tolist()
-        answers = [self._must_yield(ids[i], acts[i].slot) for i in queries]
+        ids, order, fleet = self._ids, self._order, self.fleet
+        queries = fleet.plan_sumo(self._slots, leaders, self._get_speed, read, lanes, poss).tolist()
+        answers = [self._must_yield(ids[i], order[i].slot) for i in queries]
         out = fleet.step(np.array(answers, dtype=bool), self.dt)
-        self._apply(t, ids, acts, out)
+        self._apply(t, ids, order, out)
 
     def _apply(self, t: float, ids: list[str], acts: list[_Active], out: dict[str, np.ndarray]) -> None:
-        """Pushes the new poses to SUMO, by the move RouteFleet chose for each."""
-        v = self.sumo.vehicle
+        """Pushes the new poses to SUMO, by the move RouteFleet chose for each:
+        most only get a speed (SUMO's own movement puts them in place), some
+        nothing at all."""
         moves = out["move"]
-        speeds = out["v_mps"]
+        speeds = out["sumo_speed_mps"]
         failed: list[int] = []
+        set_speed, move_to, move_xy = self._set_speed, self._move_to, self._move_to_xy
+        idx = np.flatnonzero(moves == _SPEED)
+        for i, sp in zip(idx.tolist(), speeds[idx].tolist()):
+            try:
+                set_speed(ids[i], sp)
+            except Exception:
+                failed.append(i)
+        self.moves["speed"] += len(idx)
+        self.moves["none"] += int(np.count_nonzero(moves == _HOLD))
         lane_names = self._lanes.names
         idx = np.flatnonzero(moves == _LANE)
-        move_to, set_speed = v.moveTo, v.setSpeed
         for i, lane, pos, sp in zip(idx.tolist(), out["lane"][idx].tolist(), out["lane_pos_m"][idx].tolist(), speeds[idx].tolist()):
             try:
                 move_to(ids[i], lane_names[lane], pos)
                 set_speed(ids[i], sp)
             except Exception:
                 failed.append(i)
-        self.cheap_moves += len(idx)
+        self.moves["lane"] += len(idx)
         idx = np.flatnonzero(moves == _XY)
-        move, edge_names = v.moveToXY, self._edges.names
+        edge_names = self._edges.names
         cols = (out[k][idx].tolist() for k in ("edge", "lane_index", "x_front_m", "y_front_m", "angle_deg"))
         for i, edge, lane_index, xf, yf, angle, sp in zip(idx.tolist(), *cols, speeds[idx].tolist()):
             try:
-                move(ids[i], edge_names[edge], lane_index, xf, yf, angle, 3)
+                move_xy(ids[i], edge_names[edge], lane_index, xf, yf, angle, 3)
                 # Without it SUMO keeps reporting the last setSpeed value,
                 # and followers plan with a wrong leader speed.
                 set_speed(ids[i], sp)
             except Exception:
                 failed.append(i)
-        self.xy_moves += len(idx)
-        idx = np.flatnonzero(moves == _SPEED)
-        for i, sp in zip(idx.tolist(), speeds[idx].tolist()):
-            # About to arrive: let SUMO carry it to the end of its route.
-            try:
-                set_speed(ids[i], sp)
-            except Exception:
-                failed.append(i)
-        self.cheap_moves += len(idx)
+        self.moves["xy"] += len(idx)
         for i in np.flatnonzero(moves == _INVALID).tolist():
             # Unusable state (NaN): hand the vehicle back rather than move it anywhere.
             self._drop(ids[i], t, "invalid_state")
         for i in failed:
             self._move_failed(ids[i], acts[i], t)
-        read = out["read_position"]
-        self._read_position = {ids[i] for i in np.flatnonzero(read).tolist()}
+        self._read_position = {ids[i] for i in np.flatnonzero(out["read_position"]).tolist()}
         for i in np.flatnonzero(out["red_light"]).tolist():
             stop = self.fleet.next_stop(acts[i].slot)
             light = self._lights.name(stop[1]) if stop is not None and stop[1] >= 0 else ""
             self.violations.append((t, ids[i], light, stop[2] if stop else -1, stop[0] if stop else math.nan))
         due = np.flatnonzero(out["lane_change_due"]).tolist()
         if due:
-            lane, pos, dt = out["lane"], out["lane_pos_m"], self.dt
-            # Where SUMO will have the front after its movement over the step.
-            self._lane_change_due = [(ids[i], int(lane[i]), float(pos[i] + speeds[i] * dt), float(speeds[i])) for i in due]
-        keep = [i for i, a in enumerate(acts) if a.trajectory is not None and a.vid in self.active]
-        if keep:
+            lane, v, dt = out["lane"], out["v_mps"], self.dt
+            # Where SUMO will have the front after its movement over the step:
+            # the new front position (lane_pos_m is it minus v dt).
+            self._lane_change_due = [(ids[i], int(lane[i]), float(out["lane_pos_m"][i] + v[i] * dt), float(v[i])) for i in due]
+        if self._tracing:
             cols = [out[k] for k in ("x_front_m", "y_front_m", "v_mps", "lateral_error_m", "curvature_per_m")]
-            for i in keep:
-                acts[i].trajectory.append((t, *(float(c[i]) for c in cols)))  # type: ignore[union-attr]
+            index = self._index
+            for act in self._tracing.values():
+                i = index.get(act.vid)
+                if i is not None and i < len(acts) and acts[i] is act and act.trajectory is not None:
+                    act.trajectory.append((t, *(float(c[i]) for c in cols)))
         if self.opt.trace:
             self._trace(t, ids, acts, out)
 
@@ -907,8 +964,7 @@ class SumoRun:
             return
         current = int(index)
         direction = 1 if target > current else -1
-        v = self.sumo.vehicle
-        if not v.couldChangeLane(act.vid, direction):
+        if not _could_change_lane(self._lane_change_state, act.vid, direction):
             return
         lane_length = float(self._net_geometry().getLane(lane_id).getLength())
         length = min(max(2.0 * abs(speed), 10.0), 30.0, lane_length - pos - 1.0)
@@ -924,7 +980,7 @@ class SumoRun:
         geo2, track = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
         self.fleet.retrack(act.slot, track)
         act.geo = geo2
-        act.changing = (direction, target)
+        self._set_changing(act, (direction, target))
         act.record.lane_changes += 1
 
     def _target_lane_clear(self, vid: str, direction: int, speed: float, duration: float) -> bool:
@@ -948,7 +1004,7 @@ class SumoRun:
         geo, track = self._geometry(act.geo.edges, max(lane_index, 0))
         self.fleet.retrack(act.slot, track)
         act.geo = geo
-        act.changing = None
+        self._set_changing(act, None)
         self.counts["lane_changes_aborted"] += 1
 
     def _must_yield(self, vid: str, slot: int) -> bool:
@@ -1045,7 +1101,7 @@ class SumoRun:
         geo, track = self._geometry(route[idx:], max(int(v.getLaneIndex(act.vid)), 0))
         self.fleet.retrack(act.slot, track)
         act.geo = geo
-        act.changing = None
+        self._set_changing(act, None)
         act.route_id = v.getRouteID(act.vid)
         self.counts["reroutes"] += 1
 
@@ -1090,6 +1146,18 @@ def _parse_like(raw: str, current: Any) -> Any:
     if isinstance(current, float):
         return float(raw)
     return raw.strip()
+
+
+def _could_change_lane(lane_change_state: Callable[[str, int], Any], vid: str, direction: int) -> bool:
+    """TraCI's ``couldChangeLane`` on a given ``getLaneChangeState``: the
+    target lane had room at SUMO's last lane-change check (and the vehicle
+    did not just change)."""
+    import traci.constants as tc
+
+    state, traci_state = lane_change_state(vid, direction)
+    if traci_state & tc.LCA_BLOCKED == 0 and traci_state & (tc.LCA_LEFT if direction > 0 else tc.LCA_RIGHT):
+        return False  # it changed in the last step: the state no longer applies
+    return bool(state != tc.LCA_UNKNOWN and state & tc.LCA_BLOCKED == 0)
 
 
 def _first_line(e: BaseException) -> str:

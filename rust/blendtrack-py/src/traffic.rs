@@ -18,7 +18,8 @@ use blendtrack::VehicleState;
 use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyString, PyTuple};
+use std::collections::HashMap;
 
 type F64In<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
 type I64In<'py> = PyArrayLike1<'py, i64, AllowTypeChange>;
@@ -78,17 +79,22 @@ fn stats_dict<'py>(
 /// Per simulation step: `plan(...)` with the leaders the simulator reports
 /// returns the indices of the vehicles that must ask the simulator whether to
 /// give way; `step(answers, dt)` runs the controllers and bicycle models and
-/// returns how to put each new pose into the simulator (`move`: 0 speed only,
-/// 1 lane + position, 2 x/y/angle, 3 invalid: hand the vehicle back).
+/// returns how to put each new pose into the simulator (`move`: 0 speed only
+/// (`sumo_speed_mps`), 1 lane + position, 2 x/y/angle, 3 invalid: hand the
+/// vehicle back, 4 nothing to send).
 #[pyclass(module = "blendtrack")]
 pub struct RouteFleet {
     inner: CoreRouteFleet,
+    /// The simulator's vehicle ids of the slots that were given one, both
+    /// ways (`plan_sumo` reads leaders by id).
+    slot_of: HashMap<String, i64>,
+    name_of: Vec<Option<String>>,
 }
 
 #[pymethods]
 impl RouteFleet {
     #[new]
-    #[pyo3(signature = (*, standstill_margin_m = 1.0, yield_lookahead_m = 30.0, lane_change_room_m = 15.0, route_end_extra_m = 5.0, route_end_horizon_m = 200.0, lane_move_lateral_m = 0.15, lane_move_heading_deg = 2.0, comfort_lateral_accel_mps2 = 2.0, sample_every = 10))]
+    #[pyo3(signature = (*, standstill_margin_m = 1.0, yield_lookahead_m = 30.0, lane_change_room_m = 15.0, route_end_extra_m = 5.0, route_end_horizon_m = 200.0, lane_move_lateral_m = 0.15, lane_move_heading_deg = 2.0, comfort_lateral_accel_mps2 = 2.0, sample_every = 10, verify_every = 10))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         standstill_margin_m: f64,
@@ -100,6 +106,7 @@ impl RouteFleet {
         lane_move_heading_deg: f64,
         comfort_lateral_accel_mps2: f64,
         sample_every: u64,
+        verify_every: u64,
     ) -> PyResult<Self> {
         let inner = CoreRouteFleet::new(TrafficSettings {
             standstill_margin_m,
@@ -111,6 +118,7 @@ impl RouteFleet {
             lane_move_heading_rad: lane_move_heading_deg.to_radians(),
             comfort_lateral_accel_mps2,
             sample_every,
+            verify_every,
         })
         .map_err(|e| match e {
             TrafficError::Parameter {
@@ -124,11 +132,15 @@ impl RouteFleet {
             }),
             other => traffic_error(other),
         })?;
-        Ok(RouteFleet { inner })
+        Ok(RouteFleet {
+            inner,
+            slot_of: HashMap::new(),
+            name_of: Vec::new(),
+        })
     }
 
     /// Registers a track with its lane pieces and stop lines; returns its id.
-    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_plain, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, lane_change = None))]
+    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_offset_m, piece_lane_length_m, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, piece_lane_pos_m = None, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, lane_change = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_route(
         &mut self,
@@ -137,12 +149,14 @@ impl RouteFleet {
         config: Option<ControllerConfig>,
         piece_start_m: F64In<'_>,
         piece_scale: F64In<'_>,
-        piece_plain: I64In<'_>,
+        piece_offset_m: F64In<'_>,
+        piece_lane_length_m: F64In<'_>,
         piece_speed_mps: F64In<'_>,
         piece_lane: I64In<'_>,
         piece_edge: I64In<'_>,
         piece_lane_index: I64In<'_>,
         length_m: f64,
+        piece_lane_pos_m: Option<F64In<'_>>,
         stop_s_m: Option<F64In<'_>>,
         stop_light: Option<I64In<'_>>,
         stop_link: Option<I64In<'_>>,
@@ -154,14 +168,21 @@ impl RouteFleet {
         let starts = vec_of(&piece_start_m);
         let n = starts.len();
         let scale = vec_of(&piece_scale);
-        let plain = vec_of(&piece_plain);
+        let offset = vec_of(&piece_offset_m);
+        let lane_length = vec_of(&piece_lane_length_m);
+        let lane_pos = piece_lane_pos_m
+            .as_ref()
+            .map(vec_of)
+            .unwrap_or_else(|| vec![0.0; n]);
         let speed = vec_of(&piece_speed_mps);
         let lane = vec_of(&piece_lane);
         let edge = vec_of(&piece_edge);
         let index = vec_of(&piece_lane_index);
         for (name, got) in [
             ("piece_scale", scale.len()),
-            ("piece_plain", plain.len()),
+            ("piece_offset_m", offset.len()),
+            ("piece_lane_length_m", lane_length.len()),
+            ("piece_lane_pos_m", lane_pos.len()),
             ("piece_speed_mps", speed.len()),
             ("piece_lane", lane.len()),
             ("piece_edge", edge.len()),
@@ -173,8 +194,10 @@ impl RouteFleet {
         for i in 0..n {
             pieces.push(Piece {
                 start_m: starts[i],
+                lane_pos_start_m: lane_pos[i],
                 scale: scale[i],
-                plain: plain[i] != 0,
+                lane_length_m: lane_length[i],
+                offset_m: offset[i],
                 speed_mps: speed[i],
                 lane: u32_of("piece_lane", i, lane[i])?,
                 edge: u32_of("piece_edge", i, edge[i])?,
@@ -234,7 +257,9 @@ impl RouteFleet {
     }
 
     /// Adds a vehicle (rear-axle state) on a track; returns its slot.
-    #[pyo3(signature = (track_id, config, vehicle, *, reach_m, length_m, min_gap_m, x, y, theta, v, delta = 0.0))]
+    /// `name` (the simulator's id, unique among the vehicles here) lets
+    /// `plan_sumo` recognise it as a leader.
+    #[pyo3(signature = (track_id, config, vehicle, *, reach_m, length_m, min_gap_m, x, y, theta, v, delta = 0.0, name = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_vehicle(
         &mut self,
@@ -249,7 +274,16 @@ impl RouteFleet {
         theta: f64,
         v: f64,
         delta: f64,
+        name: Option<String>,
     ) -> PyResult<usize> {
+        if let Some(n) = &name {
+            if self.slot_of.contains_key(n) {
+                return Err(input_error(format!(
+                    "name {n:?} is already the vehicle in slot {}",
+                    self.slot_of[n]
+                )));
+            }
+        }
         let cfg = config.map(|c| c.to_core()).transpose()?;
         let params = vehicle.map(|v| v.to_core()).transpose()?;
         let body = Body {
@@ -264,9 +298,18 @@ impl RouteFleet {
             v_mps: v,
             delta_rad: delta,
         };
-        self.inner
+        let slot = self
+            .inner
             .add_vehicle(track_id, cfg, params, body, state)
-            .map_err(traffic_error)
+            .map_err(traffic_error)?;
+        if self.name_of.len() <= slot {
+            self.name_of.resize(slot + 1, None);
+        }
+        if let Some(n) = name {
+            self.slot_of.insert(n.clone(), slot as i64);
+            self.name_of[slot] = Some(n);
+        }
+        Ok(slot)
     }
 
     /// Moves a vehicle to another track; its state and statistics stay.
@@ -277,6 +320,9 @@ impl RouteFleet {
     /// Frees a slot; returns the vehicle's statistics (a dict).
     fn remove_vehicle<'py>(&mut self, py: Python<'py>, slot: i64) -> PyResult<Bound<'py, PyDict>> {
         let s = self.inner.remove_vehicle(slot).map_err(traffic_error)?;
+        if let Some(n) = self.name_of.get_mut(slot as usize).and_then(Option::take) {
+            self.slot_of.remove(&n);
+        }
         stats_dict(py, &s)
     }
 
@@ -373,6 +419,96 @@ impl RouteFleet {
             .into_pyarray(py))
     }
 
+    /// `plan` with the leaders as SUMO's `vehicle.getLeader` gives them: one
+    /// entry per slot, `None` or `(leader id, gap)` (an empty id, or a gap
+    /// below -100 m, is no leader). A leader added here with its `name` is
+    /// known by its slot; for any other `speed_of(leader id)` is called (a
+    /// leader whose speed cannot be read counts as standing). The lanes and
+    /// lane positions read from the simulator are given sparsely: for the
+    /// vehicles at `read_index` (indices into `slots`).
+    #[pyo3(signature = (slots, leaders, speed_of, read_index = None, read_lane = None, read_pos = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn plan_sumo<'py>(
+        &mut self,
+        py: Python<'py>,
+        slots: I64In<'py>,
+        leaders: &Bound<'py, PyAny>,
+        speed_of: &Bound<'py, PyAny>,
+        read_index: Option<I64In<'py>>,
+        read_lane: Option<I64In<'py>>,
+        read_pos: Option<F64In<'py>>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let sl = vec_of(&slots);
+        let n = sl.len();
+        let items: Vec<Bound<'py, PyAny>> = leaders.try_iter()?.collect::<PyResult<_>>()?;
+        same_len("leaders", n, items.len())?;
+        let mut gaps = vec![f64::NAN; n];
+        let mut lslots = vec![-1i64; n];
+        let mut lspeeds = vec![f64::NAN; n];
+        for (i, item) in items.iter().enumerate() {
+            if item.is_none() {
+                continue;
+            }
+            let t = item.cast::<PyTuple>().map_err(|_| {
+                input_error(format!("leaders[{i}] is not None or an (id, gap) tuple"))
+            })?;
+            if t.len() != 2 {
+                return Err(input_error(format!("leaders[{i}] has {} items, expected 2 (id, gap)", t.len())));
+            }
+            let id = t.get_item(0)?;
+            let id = id
+                .cast::<PyString>()
+                .map_err(|_| input_error(format!("leaders[{i}]: the id is not a string")))?;
+            let gap: f64 = t
+                .get_item(1)?
+                .extract()
+                .map_err(|_| input_error(format!("leaders[{i}]: the gap is not a number")))?;
+            let name = id.to_str()?;
+            if name.is_empty() || !(gap >= -100.0) {
+                continue;
+            }
+            gaps[i] = gap;
+            match self.slot_of.get(name) {
+                Some(&s) => lslots[i] = s,
+                None => {
+                    lspeeds[i] = speed_of
+                        .call1((id,))
+                        .and_then(|v| v.extract::<f64>())
+                        .unwrap_or(f64::NAN);
+                }
+            }
+        }
+        let mut ln = vec![-1i64; n];
+        let mut lp = vec![f64::NAN; n];
+        let ri = read_index.as_ref().map(vec_of).unwrap_or_default();
+        let rl = read_lane.as_ref().map(vec_of).unwrap_or_default();
+        let rp = read_pos.as_ref().map(vec_of).unwrap_or_default();
+        same_len("read_lane", ri.len(), rl.len())?;
+        same_len("read_pos", ri.len(), rp.len())?;
+        for (k, &i) in ri.iter().enumerate() {
+            let i = usize::try_from(i)
+                .ok()
+                .filter(|&i| i < n)
+                .ok_or_else(|| input_error(format!("read_index[{k}] = {i}: not an index into slots")))?;
+            ln[i] = rl[k];
+            lp[i] = rp[k];
+        }
+        let obs = Observations {
+            slots: &sl,
+            leader_gap_m: &gaps,
+            leader_slot: &lslots,
+            leader_speed_mps: &lspeeds,
+            lane: &ln,
+            lane_pos_m: &lp,
+        };
+        let inner = &mut self.inner;
+        let q = py.detach(|| inner.plan(&obs)).map_err(traffic_error)?;
+        Ok(q.into_iter()
+            .map(|i| i as i64)
+            .collect::<Vec<_>>()
+            .into_pyarray(py))
+    }
+
     /// Second half of a step: `must_yield[j]` answers the j-th index `plan`
     /// returned. Returns a dict of arrays in the plan's order (see the class docs).
     fn step<'py>(
@@ -409,6 +545,7 @@ impl RouteFleet {
             ("s_rear_m", r.s_rear_m),
             ("curvature_per_m", r.curvature_per_m),
             ("virtual_obstacle_m", r.virtual_obstacle_m),
+            ("sumo_speed_mps", r.sumo_speed_mps),
         ] {
             d.set_item(k, col.into_pyarray(py))?;
         }
@@ -437,6 +574,17 @@ impl RouteFleet {
         self.inner.fleet().n_tracks()
     }
 
+    /// Threads a step of many vehicles is split over: 0 (the default) for
+    /// one per core, 1 to stay on the calling thread.
+    #[getter]
+    fn threads(&self) -> usize {
+        self.inner.fleet().threads()
+    }
+    #[setter]
+    fn set_threads(&mut self, threads: usize) {
+        self.inner.set_threads(threads);
+    }
+
     fn __len__(&self) -> usize {
         self.inner.len()
     }
@@ -458,5 +606,6 @@ fn _move_codes_are_stable() {
             && Move::Lane as u8 == 1
             && Move::Xy as u8 == 2
             && Move::Invalid as u8 == 3
+            && Move::Hold as u8 == 4
     );
 }

@@ -6,8 +6,8 @@
 //!
 //! - a [`Route`] per track: the lane pieces along the track (where each lane
 //!   starts in arc length, its speed limit, how arc length maps to the
-//!   simulator's lane position, whether the track follows that lane's
-//!   centreline exactly) and the stop lines of the junctions ahead, each
+//!   simulator's lane position, how far the track strays from that lane's
+//!   centreline) and the stop lines of the junctions ahead, each
 //!   with its traffic light link or its right of way by the road network;
 //! - per vehicle: its state (blendtrack's state is authoritative: the bridge
 //!   never passes it back in), the arc length of its front bumper, the next
@@ -26,20 +26,31 @@
 //!    clear); the end of the route is a standing obstacle.
 //! 2. [`RouteFleet::step`] takes the answers, runs the controllers and the
 //!    bicycle model for everyone, and returns for each vehicle how to put the
-//!    new pose into the simulator: [`Move::Lane`] (lane and lane position,
-//!    when the vehicle is on a plain lane's centreline: cheap), [`Move::Xy`]
-//!    (front-bumper point and heading), [`Move::Speed`] (just the speed, when
-//!    the vehicle is about to arrive), or [`Move::Invalid`] (unusable state:
-//!    hand the vehicle back).
+//!    new pose into the simulator, cheapest first: [`Move::Hold`] (nothing to
+//!    send), [`Move::Speed`] (only a speed: the simulator's own movement
+//!    carries the vehicle to its new place), [`Move::Lane`] (lane and lane
+//!    position, then the speed), [`Move::Xy`] (front-bumper point and
+//!    heading, then the speed), or [`Move::Invalid`] (unusable state: hand
+//!    the vehicle back).
 //!
-//! Lane positions: a [`Move::Lane`] position is where the vehicle's front
-//! must be placed BEFORE the simulator's own movement over the step (SUMO's
-//! `moveTo`), so it is the new front position minus `v dt`; it is never
-//! behind where the simulator already has the vehicle on the same lane (arc
-//! length and lane position can differ by centimetres), so a follower never
-//! sees its leader jump backwards. After any other move the simulator's lane
-//! position is unknown to blendtrack until the bridge reports it
-//! ([`RouteOutputs::read_position`]).
+//! Lane positions. A vehicle is given to the simulator by lane while its
+//! control point is within `lane_move_lateral_m` (minus the track's own
+//! offset from the lane's centreline, [`Piece::offset_m`]) and
+//! `lane_move_heading_rad` of the track, and by (x, y) otherwise (lane
+//! changes, junction lanes the track does not follow, larger errors).
+//! By lane, blendtrack knows where the simulator has the front after its
+//! movement (`known`): a simulator that moves a vehicle `speed x dt` along
+//! its lanes in a step (SUMO with speed mode 0, Euler update) then needs no
+//! position at all, only the speed that makes up the distance from there to
+//! the front's new lane position (within `GLIDE_TOLERANCE_*` of the
+//! vehicle's own, which keeps the simulator's reported speed honest); one
+//! that would need more is placed with [`Move::Lane`] at the new position
+//! minus `v dt` (before the simulator's movement), never behind where the
+//! simulator already has it, so a follower never sees its leader jump
+//! backwards. After a move over a lane end, an (x, y) move or a placement
+//! onto another lane, the position is unknown until the bridge reports it
+//! ([`RouteOutputs::read_position`]); every `verify_every` steps it reports
+//! it anyway, so a prediction that went wrong is corrected.
 //!
 //! Lanes, edges, junction lanes and traffic lights are small integers of the
 //! caller's choosing (the bridge interns the simulator's string ids).
@@ -113,10 +124,18 @@ impl Signal {
 pub struct Piece {
     /// Arc length where the piece starts on the track (m).
     pub start_m: f64,
+    /// The simulator's lane position at `start_m` (m; 0 when the piece
+    /// starts where its lane starts).
+    pub lane_pos_start_m: f64,
     /// Simulator lane length per metre of track.
     pub scale: f64,
-    /// True when the track follows this lane's centreline exactly.
-    pub plain: bool,
+    /// The simulator's length of the lane (m).
+    pub lane_length_m: f64,
+    /// Largest distance between the track and the lane's centreline over the
+    /// piece (m); +inf where the track leaves the lane (a lane change). A
+    /// vehicle is handed to the simulator as (lane, position) only while its
+    /// lateral error plus this stays under the settings' bound.
+    pub offset_m: f64,
     /// Speed limit (m/s).
     pub speed_mps: f64,
     /// The caller's ids of the lane and its edge, and the lane's index on the edge.
@@ -185,6 +204,24 @@ impl Route {
                 return bad(format!(
                     "piece {i} has lane scale {}: must be finite and > 0",
                     p.scale
+                ));
+            }
+            if !(p.lane_pos_start_m.is_finite() && p.lane_pos_start_m >= 0.0) {
+                return bad(format!(
+                    "piece {i} starts at lane position {} m: must be finite and >= 0",
+                    p.lane_pos_start_m
+                ));
+            }
+            if !(p.lane_length_m.is_finite() && p.lane_length_m > 0.0) {
+                return bad(format!(
+                    "piece {i} has lane length {} m: must be finite and > 0",
+                    p.lane_length_m
+                ));
+            }
+            if p.offset_m.is_nan() || p.offset_m < 0.0 {
+                return bad(format!(
+                    "piece {i} has offset {} m: must be >= 0 (+inf: off the lane)",
+                    p.offset_m
                 ));
             }
             if !(p.speed_mps > 0.0) {
@@ -261,6 +298,9 @@ pub struct TrafficSettings {
     pub comfort_lateral_accel_mps2: f64,
     /// Every this many steps of a vehicle, one (|curvature|, |v|, |e|, |a_lat|) sample is kept.
     pub sample_every: u64,
+    /// Every this many steps of a vehicle the bridge reads where the
+    /// simulator has it, to check the prediction (0: only where unknown).
+    pub verify_every: u64,
 }
 
 impl Default for TrafficSettings {
@@ -275,6 +315,7 @@ impl Default for TrafficSettings {
             lane_move_heading_rad: 2.0_f64.to_radians(),
             comfort_lateral_accel_mps2: 2.0,
             sample_every: 10,
+            verify_every: 10,
         }
     }
 }
@@ -336,7 +377,10 @@ const MAX_LIGHTS: usize = 1 << 20;
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
 pub enum Move {
-    /// Only set the speed (about to arrive: let the simulator finish the route).
+    /// Only set the speed ([`RouteOutputs::sumo_speed_mps`]): the
+    /// simulator's own movement over the step carries the front exactly to
+    /// its new place on the lane (or over a lane end onto the next lane of
+    /// the route); also when the vehicle is about to arrive.
     Speed = 0,
     /// (lane, lane position) then the speed.
     Lane = 1,
@@ -344,6 +388,53 @@ pub enum Move {
     Xy = 2,
     /// The state is unusable: hand the vehicle back, do not move it.
     Invalid = 3,
+    /// Nothing to send: the speed the simulator already has carries the
+    /// front to within `HOLD_SPEED_MPS * dt` of its new place (the rest is
+    /// made up in the next step).
+    Hold = 4,
+}
+
+/// A speed-only move is made while the speed it needs stays within this
+/// (m/s, plus the relative part below) of the vehicle's own speed in the
+/// simulator's lane coordinates (speed x the piece's scale); otherwise the
+/// vehicle is placed with a [`Move::Lane`].
+const GLIDE_TOLERANCE_MPS: f64 = 0.1;
+const GLIDE_TOLERANCE_REL: f64 = 0.02;
+/// Below this change of the speed (m/s) no speed command is sent ([`Move::Hold`]).
+const HOLD_SPEED_MPS: f64 = 0.005;
+/// A speed-only move may carry the front over at most this many lane ends
+/// (short junction lanes at speed).
+const GLIDE_MAX_LANE_ENDS: usize = 3;
+
+/// The distance the simulator must move the front, along its lanes, from
+/// where it has it (`known`: lane, position) to lane position `target` on
+/// piece `k`, and whether that passes a lane end; None when it cannot tell
+/// (unknown position, or a lane the route's pieces do not lead from).
+fn glide_distance(route: &Route, k: usize, target: f64, known: Option<(u32, f64)>) -> Option<(f64, bool)> {
+    let (lane, p) = known?;
+    let pieces = &route.pieces;
+    if pieces[k].lane == lane {
+        return Some((target - p, false));
+    }
+    // Over lane ends: each piece from the known lane on must be a whole lane
+    // that the simulator enters at its start.
+    let mut dist = target;
+    let mut j = k;
+    for _ in 0..GLIDE_MAX_LANE_ENDS {
+        if j == 0 || pieces[j].lane_pos_start_m != 0.0 {
+            return None;
+        }
+        j -= 1;
+        let q = &pieces[j];
+        if q.lane == pieces[j + 1].lane || !q.offset_m.is_finite() {
+            return None;
+        }
+        if q.lane == lane {
+            return Some((dist + q.lane_length_m - p, true));
+        }
+        dist += q.lane_length_m;
+    }
+    None
 }
 
 #[derive(Debug, Clone)]
@@ -361,8 +452,12 @@ struct Driven {
     /// just before the line): re-deciding "can it still stop?" every step
     /// would let the vehicle roll into the junction at the last moment.
     holding: Option<usize>,
-    /// Where the simulator has the front after the last lane move: (lane, position).
+    /// Where the simulator has the front after its movement over the last
+    /// step, (lane, position): predicted from the last move, or read back by
+    /// the bridge; None when unknown.
     known: Option<(u32, f64)>,
+    /// The speed last sent to the simulator (NaN before the first).
+    sumo_speed: f64,
     stats: DriveStats,
 }
 
@@ -423,8 +518,12 @@ pub struct RouteOutputs {
     pub red_light: Vec<bool>,
     /// A lane change is due where the vehicle now is: ask the simulator for room.
     pub lane_change_due: Vec<bool>,
-    /// The simulator's lane position is unknown to blendtrack: report it next step.
+    /// Report the simulator's lane and lane position next step: unknown to
+    /// blendtrack, or due for a check of the prediction.
     pub read_position: Vec<bool>,
+    /// The speed to give the simulator (m/s): the vehicle's own, or for a
+    /// speed-only move the one that carries the front to its new place.
+    pub sumo_speed_mps: Vec<f64>,
 }
 
 /// A [`Fleet`] driving road routes (see the module docs).
@@ -514,6 +613,10 @@ impl RouteFleet {
     pub fn fleet(&self) -> &Fleet {
         &self.fleet
     }
+    /// See [`Fleet::set_threads`].
+    pub fn set_threads(&mut self, threads: usize) {
+        self.fleet.set_threads(threads);
+    }
     pub fn len(&self) -> usize {
         self.fleet.len()
     }
@@ -599,6 +702,7 @@ impl RouteFleet {
             yellow: None,
             holding: None,
             known: None,
+            sumo_speed: f64::NAN,
             stats: DriveStats::default(),
         });
         Ok(slot)
@@ -922,7 +1026,23 @@ impl RouteFleet {
             let route = &d.route;
             let k = if finite { route.piece_at(sf_new) } else { 0 };
             let piece = route.pieces[k];
-            let mut pos = (sf_new - piece.start_m) * piece.scale - v * dt_s;
+            // Where the front must be on the piece's lane after the
+            // simulator's own movement over the step.
+            let target = piece.lane_pos_start_m + (sf_new - piece.start_m) * piece.scale;
+            let mut pos = target - v * dt_s;
+            let mut sumo_speed = v;
+            let on_lane = e.abs() + piece.offset_m < st.lane_move_lateral_m
+                && eth.abs() < st.lane_move_heading_rad
+                && v >= 0.0;
+            // (distance the simulator must move the front, crosses a lane end)
+            let glide = if on_lane {
+                glide_distance(route, k, target, d.known)
+            } else {
+                None
+            };
+            // Where the simulator will have the front after its movement,
+            // when blendtrack can tell without asking: (lane, position).
+            let mut predicted = None;
             let mv = if !(out.ok[i] && finite) {
                 Move::Invalid
             } else if k == route.pieces.len() - 1
@@ -932,17 +1052,35 @@ impl RouteFleet {
                 // About to arrive: a deferred (x, y) move would be applied
                 // after the simulator removed the vehicle.
                 Move::Speed
-            } else if piece.plain
-                && pos >= d.body.length_m
-                && e.abs() < st.lane_move_lateral_m
-                && eth.abs() < st.lane_move_heading_rad
-                && v >= 0.0
-            {
+            } else if let Some((dist, cross)) = glide.filter(|&(dist, _)| {
+                let need = dist / dt_s;
+                let expect = v * piece.scale;
+                need >= 0.0 && (need - expect).abs() <= GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect
+            }) {
+                // The simulator's own movement at this speed lands the front
+                // exactly where it must be: one speed command, or none.
+                sumo_speed = dist / dt_s;
+                let hold = !cross && (sumo_speed - d.sumo_speed).abs() < HOLD_SPEED_MPS;
+                if hold {
+                    sumo_speed = d.sumo_speed;
+                }
+                if !cross {
+                    // Exact; after a lane end the simulator's choice of the
+                    // next lane is read back instead.
+                    predicted = d.known.map(|(lane, p)| (lane, p + sumo_speed * dt_s));
+                }
+                if hold {
+                    Move::Hold
+                } else {
+                    Move::Speed
+                }
+            } else if on_lane && pos >= d.body.length_m {
                 if let Some((lane, p)) = d.known {
                     if lane == piece.lane {
                         pos = pos.max(p);
                     }
                 }
+                predicted = Some((piece.lane, pos + v * dt_s));
                 Move::Lane
             } else {
                 Move::Xy
@@ -1001,7 +1139,8 @@ impl RouteFleet {
                 r.accel_mps2.push(acc);
                 d.state = state;
                 d.s_front_m = sf_new;
-                d.known = (mv == Move::Lane).then_some((piece.lane, pos + v * dt_s));
+                d.known = predicted;
+                d.sumo_speed = sumo_speed;
             } else {
                 r.accel_mps2.push(f64::NAN);
             }
@@ -1026,8 +1165,11 @@ impl RouteFleet {
             r.virtual_obstacle_m.push(out.virtual_obstacle_m[i]);
             r.red_light.push(red);
             r.lane_change_due.push(due);
+            // Read back where the prediction ends, and now and then to check it.
+            let verify = st.verify_every > 0 && d.stats.steps % st.verify_every == 0;
             r.read_position
-                .push(mv != Move::Lane && mv != Move::Invalid);
+                .push(mv != Move::Invalid && (d.known.is_none() || verify));
+            r.sumo_speed_mps.push(sumo_speed);
         }
         Ok(r)
     }
@@ -1058,10 +1200,12 @@ mod tests {
     /// junction lane 11 (not plain) to 210 m, then lane 12 (plain, scale 1.01).
     fn road(signal: Option<(usize, usize)>, major: bool) -> (Path, Route) {
         let path = Path::straight(600.0, 1.0).unwrap();
-        let piece = |start_m, plain, lane, edge, scale| Piece {
+        let piece = |start_m: f64, plain: bool, lane, edge, scale: f64, lane_length_m| Piece {
             start_m,
+            lane_pos_start_m: 0.0,
             scale,
-            plain,
+            lane_length_m,
+            offset_m: if plain { 0.0 } else { f64::INFINITY },
             speed_mps: 20.0,
             lane,
             edge,
@@ -1069,9 +1213,9 @@ mod tests {
         };
         let route = Route::new(
             vec![
-                piece(0.0, true, 10, 1, 1.0),
-                piece(200.0, false, 11, 2, 1.0),
-                piece(210.0, true, 12, 3, 1.01),
+                piece(0.0, true, 10, 1, 1.0, 200.0),
+                piece(200.0, false, 11, 2, 1.0, 10.0),
+                piece(210.0, true, 12, 3, 1.01, 390.0 * 1.01),
             ],
             vec![StopLine {
                 s_m: 200.0,
@@ -1138,8 +1282,10 @@ mod tests {
     fn route_tables_are_checked() {
         let p = |start_m| Piece {
             start_m,
+            lane_pos_start_m: 0.0,
             scale: 1.0,
-            plain: true,
+            lane_length_m: 100.0,
+            offset_m: 0.0,
             speed_mps: 10.0,
             lane: 0,
             edge: 0,
@@ -1573,5 +1719,186 @@ mod tests {
             }),
             Err(TrafficError::Parameter { .. })
         ));
+    }
+
+    /// A stand-in for the simulator's own movement: it keeps each vehicle's
+    /// (lane, position, speed), applies the moves, then moves it `speed x dt`
+    /// along `lanes` (id, length) in order, as SUMO does with speed mode 0.
+    struct Sim {
+        lanes: Vec<(u32, f64)>,
+        lane: usize,
+        pos: f64,
+        speed: f64,
+    }
+
+    impl Sim {
+        fn apply(&mut self, out: &RouteOutputs, i: usize) {
+            match out.moves[i] {
+                Move::Hold => {}
+                Move::Speed => self.speed = out.sumo_speed_mps[i],
+                Move::Lane => {
+                    self.lane = self.lanes.iter().position(|l| l.0 == out.lane[i]).unwrap();
+                    self.pos = out.lane_pos_m[i];
+                    self.speed = out.sumo_speed_mps[i];
+                }
+                m => panic!("unexpected move {m:?}"),
+            }
+            self.pos += self.speed * DT;
+            while self.pos > self.lanes[self.lane].1 && self.lane + 1 < self.lanes.len() {
+                self.pos -= self.lanes[self.lane].1;
+                self.lane += 1;
+            }
+        }
+        fn obs(&self) -> (i64, f64) {
+            (self.lanes[self.lane].0 as i64, self.pos)
+        }
+    }
+
+    /// One plan + step for one vehicle that reports the simulator's lane
+    /// position when asked to; returns the outputs.
+    fn sim_step(f: &mut RouteFleet, slot: i64, sim: &mut Sim, report: bool) -> RouteOutputs {
+        let (lane, pos) = if report { sim.obs() } else { (-1, f64::NAN) };
+        f.plan(&Observations {
+            slots: &[slot],
+            leader_gap_m: &[f64::NAN],
+            leader_slot: &[-1],
+            leader_speed_mps: &[f64::NAN],
+            lane: &[lane],
+            lane_pos_m: &[pos],
+        })
+        .unwrap();
+        let out = f.step(&[], DT).unwrap();
+        sim.apply(&out, 0);
+        out
+    }
+
+    /// Where the front must be on `lane`, from its arc length on `road(..)`.
+    fn front_lane_pos(f: &RouteFleet, slot: i64) -> (u32, f64) {
+        let sf = f.s_front(slot).unwrap();
+        let d = f.driven(slot).unwrap();
+        let p = d.route.pieces[d.route.piece_at(sf)];
+        (p.lane, p.lane_pos_start_m + (sf - p.start_m) * p.scale)
+    }
+
+    #[test]
+    fn on_its_lane_a_vehicle_is_moved_by_its_speed_alone() {
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f.add_vehicle(t, None, None, body(), at(20.0, 14.5)).unwrap() as i64;
+        let mut sim = Sim {
+            lanes: vec![(10, 200.0)],
+            lane: 0,
+            pos: 0.0,
+            speed: 0.0,
+        };
+        let mut read = true;
+        let mut counts = [0usize; 5];
+        for k in 0..500 {
+            if f.s_front(a).unwrap() > 190.0 {
+                break; // the junction lane is not plain: (x, y) moves there
+            }
+            let out = sim_step(&mut f, a, &mut sim, read);
+            read = out.read_position[0];
+            counts[out.moves[0] as usize] += 1;
+            if k == 0 {
+                assert_eq!(out.moves[0], Move::Lane, "the first move places the vehicle");
+            }
+            let (lane, want) = front_lane_pos(&f, a);
+            assert_eq!(lane, 10);
+            // Speed-only moves land the front where blendtrack has it (a
+            // hold to within HOLD_SPEED_MPS * dt).
+            assert!(
+                (sim.pos - want).abs() <= HOLD_SPEED_MPS * DT + 1e-9,
+                "step {k}: simulator {} vs {want}",
+                sim.pos
+            );
+            // The speed sent is the vehicle's own (here scale 1).
+            assert!((out.sumo_speed_mps[0] - out.v_mps[0]).abs() <= HOLD_SPEED_MPS + 1e-9);
+            // Checked every verify_every steps, else not asked for.
+            assert_eq!(read, f.stats(a).unwrap().steps % 10 == 0, "step {k}");
+        }
+        assert!(counts[Move::Speed as usize] > 50, "{counts:?}");
+        assert!(counts[Move::Hold as usize] > 10, "cruising needs no command: {counts:?}");
+        assert_eq!(counts[Move::Lane as usize], 1, "{counts:?}");
+        assert_eq!(counts[Move::Xy as usize], 0, "{counts:?}");
+    }
+
+    #[test]
+    fn a_speed_move_carries_the_vehicle_over_a_lane_end_and_the_position_is_read_back() {
+        // The junction lane follows its lane's centreline within 2 cm: plain enough.
+        let (path, mut route) = road(None, true);
+        route.pieces[1].offset_m = 0.02;
+        let (mut f, t) = fleet_on((path, route));
+        let a = f.add_vehicle(t, None, None, body(), at(150.0, 10.0)).unwrap() as i64;
+        let mut sim = Sim {
+            lanes: vec![(10, 200.0), (11, 10.0), (12, 390.0 * 1.01)],
+            lane: 0,
+            pos: 0.0,
+            speed: 0.0,
+        };
+        let mut read = true;
+        let mut crossings = 0;
+        for k in 0..120 {
+            let before = sim.lane;
+            let out = sim_step(&mut f, a, &mut sim, read);
+            read = out.read_position[0];
+            if k > 0 {
+                assert!(
+                    matches!(out.moves[0], Move::Speed | Move::Hold),
+                    "step {k}: {:?}",
+                    out.moves[0]
+                );
+            }
+            if sim.lane != before {
+                crossings += 1;
+                assert!(read, "after a lane end the simulator's lane is read back");
+            }
+            let (lane, want) = front_lane_pos(&f, a);
+            assert_eq!(lane, sim.lanes[sim.lane].0, "step {k}");
+            assert!((sim.pos - want).abs() < 1e-6, "step {k}: {} vs {want}", sim.pos);
+        }
+        assert_eq!(crossings, 2);
+        // On lane 12 (scale 1.01) the speed sent is in its lane coordinates.
+        let out = sim_step(&mut f, a, &mut sim, read);
+        assert!((out.sumo_speed_mps[0] / out.v_mps[0] - 1.01).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_simulator_that_lags_the_prediction_gets_the_vehicle_placed_again() {
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f.add_vehicle(t, None, None, body(), at(40.0, 8.0)).unwrap() as i64;
+        let mut sim = Sim {
+            lanes: vec![(10, 200.0)],
+            lane: 0,
+            pos: 0.0,
+            speed: 0.0,
+        };
+        for _ in 0..5 {
+            sim_step(&mut f, a, &mut sim, true);
+        }
+        // The simulator held the vehicle back 1 m (it could not move it).
+        sim.pos -= 1.0;
+        let out = sim_step(&mut f, a, &mut sim, true);
+        assert_eq!(
+            out.moves[0],
+            Move::Lane,
+            "no speed command catches up 1 m in a step: it is placed"
+        );
+        let (_, want) = front_lane_pos(&f, a);
+        assert!((sim.pos - want).abs() < 1e-9);
+    }
+
+    #[test]
+    fn piece_tables_with_bad_lane_positions_lengths_or_offsets_are_rejected() {
+        let (_, route) = road(None, true);
+        for (k, bad) in [
+            (0, Piece { lane_pos_start_m: -1.0, ..route.pieces[0] }),
+            (1, Piece { lane_length_m: 0.0, ..route.pieces[1] }),
+            (2, Piece { offset_m: f64::NAN, ..route.pieces[2] }),
+        ] {
+            let mut pieces = route.pieces.clone();
+            pieces[k] = bad;
+            let e = Route::new(pieces, route.stops.clone(), 600.0, None).unwrap_err();
+            assert!(e.to_string().contains(&format!("piece {k}")), "{e}");
+        }
     }
 }
