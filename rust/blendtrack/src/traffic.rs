@@ -394,12 +394,15 @@ pub enum Move {
     Hold = 4,
 }
 
-/// A speed-only move is made while the speed it needs stays within this
-/// (m/s, plus the relative part below) of the vehicle's own speed in the
-/// simulator's lane coordinates (speed x the piece's scale); otherwise the
-/// vehicle is placed with a [`Move::Lane`].
+/// The speed of a speed-only move stays within this (m/s, plus the relative
+/// part below) of the vehicle's own speed in the simulator's lane
+/// coordinates (speed x the piece's scale): what the simulator reports to
+/// other drivers stays honest.
 const GLIDE_TOLERANCE_MPS: f64 = 0.1;
 const GLIDE_TOLERANCE_REL: f64 = 0.02;
+/// A simulator that has the front more than this (m) behind where a
+/// speed-only move can bring it is placed with a [`Move::Lane`].
+const GLIDE_BEHIND_M: f64 = 0.5;
 /// Below this change of the speed (m/s) no speed command is sent ([`Move::Hold`]).
 const HOLD_SPEED_MPS: f64 = 0.005;
 /// A speed-only move may carry the front over at most this many lane ends
@@ -1052,14 +1055,18 @@ impl RouteFleet {
                 // About to arrive: a deferred (x, y) move would be applied
                 // after the simulator removed the vehicle.
                 Move::Speed
-            } else if let Some((dist, cross)) = glide.filter(|&(dist, _)| {
-                let need = dist / dt_s;
+            } else if let Some((dist, cross)) =
+                glide.filter(|&(dist, _)| dist - v * piece.scale * dt_s <= GLIDE_BEHIND_M)
+            {
+                // The simulator's own movement carries the front to its new
+                // place at the speed that makes up the distance, kept within
+                // GLIDE_TOLERANCE_* of the vehicle's own speed (in the
+                // simulator's lane coordinates): a simulator a little off
+                // (ahead, or behind by up to GLIDE_BEHIND_M) is brought back
+                // over a few steps; it is never moved backwards.
                 let expect = v * piece.scale;
-                need >= 0.0 && (need - expect).abs() <= GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect
-            }) {
-                // The simulator's own movement at this speed lands the front
-                // exactly where it must be: one speed command, or none.
-                sumo_speed = dist / dt_s;
+                let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect;
+                sumo_speed = (dist / dt_s).clamp((expect - tol).max(0.0), expect + tol);
                 let hold = !cross && (sumo_speed - d.sumo_speed).abs() < HOLD_SPEED_MPS;
                 if hold {
                     sumo_speed = d.sumo_speed;
@@ -1513,33 +1520,41 @@ mod tests {
     }
 
     #[test]
-    fn a_lane_move_never_goes_back_behind_where_the_simulator_has_the_vehicle() {
+    fn a_placement_never_goes_back_behind_where_the_simulator_has_the_vehicle() {
         let (mut f, t) = fleet_on(road(None, true));
         let a = f
             .add_vehicle(t, None, None, body(), at(50.0, 10.0))
             .unwrap() as i64;
         let sf = f.s_front(a).unwrap();
-        // The simulator reports the front 0.5 m further on lane 10.
-        f.plan(&Observations {
-            slots: &[a],
-            leader_gap_m: &[f64::NAN],
-            leader_slot: &[-1],
-            leader_speed_mps: &[f64::NAN],
-            lane: &[10],
-            lane_pos_m: &[sf + 0.5 + 2.0],
-        })
-        .unwrap();
+        let slots = [a];
+        let plan = |f: &mut RouteFleet, pos: f64| {
+            f.plan(&Observations {
+                slots: &slots,
+                leader_gap_m: &[f64::NAN],
+                leader_slot: &[-1],
+                leader_speed_mps: &[f64::NAN],
+                lane: &[10],
+                lane_pos_m: &[pos],
+            })
+            .unwrap();
+        };
+        // The simulator reports the front 0.5 m further on lane 10: it is
+        // slowed down (a speed move), not put back.
+        plan(&mut f, sf + 0.5);
+        let out = f.step(&[], DT).unwrap();
+        assert_eq!(out.moves, [Move::Speed]);
+        assert!(out.sumo_speed_mps[0] < out.v_mps[0] && out.sumo_speed_mps[0] >= 0.0);
+        // Reported 20 m further (a lost vehicle): it waits there, never backwards.
+        plan(&mut f, sf + 20.0);
+        let out = f.step(&[], DT).unwrap();
+        assert!(matches!(out.moves[0], Move::Speed | Move::Hold));
+        assert!(out.sumo_speed_mps[0] >= 0.0);
+        // Reported 2 m behind: placed where it must be.
+        let sf = f.s_front(a).unwrap();
+        plan(&mut f, sf - 2.0);
         let out = f.step(&[], DT).unwrap();
         assert_eq!(out.moves, [Move::Lane]);
-        assert!(
-            (out.lane_pos_m[0] - (sf + 2.5)).abs() < 1e-12,
-            "{}",
-            out.lane_pos_m[0]
-        );
-        // Next step it expects the vehicle where that move put it (+ v dt).
-        let v = out.v_mps[0];
-        let out2 = step(&mut f, &[a], false).1;
-        assert!(out2.lane_pos_m[0] >= sf + 2.5 + v * DT - 1e-12);
+        assert!((out.lane_pos_m[0] + out.v_mps[0] * DT - f.s_front(a).unwrap()).abs() < 1e-9);
     }
 
     #[test]
@@ -1885,6 +1900,46 @@ mod tests {
         );
         let (_, want) = front_lane_pos(&f, a);
         assert!((sim.pos - want).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_simulator_a_little_off_is_brought_back_by_the_speed_never_moved_back() {
+        for offset in [0.3, -0.3] {
+            let (mut f, t) = fleet_on(road(None, true));
+            let a = f.add_vehicle(t, None, None, body(), at(40.0, 8.0)).unwrap() as i64;
+            let mut sim = Sim {
+                lanes: vec![(10, 200.0)],
+                lane: 0,
+                pos: 0.0,
+                speed: 0.0,
+            };
+            for _ in 0..5 {
+                sim_step(&mut f, a, &mut sim, true);
+            }
+            // The simulator has the front 0.3 m ahead of (or behind) blendtrack's.
+            sim.pos += offset;
+            let mut err = offset;
+            for k in 0..40 {
+                let before = sim.pos;
+                let out = sim_step(&mut f, a, &mut sim, true);
+                assert!(
+                    matches!(out.moves[0], Move::Speed | Move::Hold),
+                    "offset {offset}, step {k}: {:?}",
+                    out.moves[0]
+                );
+                assert!(sim.pos >= before, "never backwards");
+                let v = out.v_mps[0];
+                assert!(
+                    (out.sumo_speed_mps[0] - v).abs() <= GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * v + 1e-9,
+                    "the speed SUMO reports stays near the vehicle's"
+                );
+                let (_, want) = front_lane_pos(&f, a);
+                let now = sim.pos - want;
+                assert!(now.abs() <= err.abs() + 1e-9, "offset {offset}, step {k}: {now} vs {err}");
+                err = now;
+            }
+            assert!(err.abs() < 1e-6, "offset {offset}: made up after 40 steps, {err} left");
+        }
     }
 
     #[test]
