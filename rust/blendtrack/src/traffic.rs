@@ -1067,7 +1067,12 @@ impl RouteFleet {
                 let expect = v * piece.scale;
                 let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect;
                 sumo_speed = (dist / dt_s).clamp((expect - tol).max(0.0), expect + tol);
-                let hold = !cross && (sumo_speed - d.sumo_speed).abs() < HOLD_SPEED_MPS;
+                // A standstill is always sent: a held creep speed would let
+                // the simulator drift ahead (0.4 mm a step at 4 mm/s), and
+                // it is never moved back.
+                let hold = !cross
+                    && (sumo_speed - d.sumo_speed).abs() < HOLD_SPEED_MPS
+                    && (sumo_speed > 0.0 || d.sumo_speed == 0.0);
                 if hold {
                     sumo_speed = d.sumo_speed;
                 }
@@ -1940,6 +1945,37 @@ mod tests {
             }
             assert!(err.abs() < 1e-6, "offset {offset}: made up after 40 steps, {err} left");
         }
+    }
+
+    #[test]
+    fn a_vehicle_that_stops_leaves_the_simulator_standing_not_creeping() {
+        // A red light ahead: the vehicle brakes to a stop at the line and
+        // waits; the simulator, moved by the speeds sent, ends where it is.
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        f.set_signal(0, &[Signal::Stop]).unwrap();
+        let a = f.add_vehicle(t, None, None, body(), at(150.0, 10.0)).unwrap() as i64;
+        let mut sim = Sim {
+            lanes: vec![(10, 200.0)],
+            lane: 0,
+            pos: 0.0,
+            speed: 0.0,
+        };
+        let mut read = true;
+        for _ in 0..3000 {
+            read = sim_step(&mut f, a, &mut sim, read).read_position[0];
+        }
+        let (_, want) = front_lane_pos(&f, a);
+        assert!(f.state(a).unwrap().v_mps.abs() < 1e-3);
+        assert_eq!(sim.speed, 0.0, "the simulator's speed is a standstill");
+        assert!((sim.pos - want).abs() < 1e-3, "simulator {} vs {want} after 300 s", sim.pos);
+        // The last speed sent was a creep of 4 mm/s (the end of a gentle
+        // approach): the standstill is still sent, no drift for 100 s.
+        sim.speed = 0.004;
+        f.driven[a as usize].as_mut().unwrap().sumo_speed = 0.004;
+        for _ in 0..1000 {
+            read = sim_step(&mut f, a, &mut sim, read).read_position[0];
+        }
+        assert!((sim.pos - want).abs() < 1e-3, "simulator drifted to {} vs {want}", sim.pos);
     }
 
     #[test]
