@@ -15,7 +15,7 @@ use crate::lateral::{
 use crate::longitudinal::{longitudinal_accel, relevance_distance, Corridor, Obstacle};
 use crate::path::{wrap_angle, Path};
 use crate::vehicle::{VehicleParams, VehicleState};
-use nalgebra::Point2;
+use nalgebra::{Point2, Vector2};
 use std::sync::Arc;
 
 /// A path and its virtual borders.
@@ -73,6 +73,10 @@ pub struct Controller {
     hint_rear: Option<f64>,
     hint_front: Option<f64>,
     hint_cp: Option<f64>,
+    /// The rear axle and heading of the last step: the hints are moved on by
+    /// the distance travelled along that heading since, so each projection
+    /// starts next to its foot point.
+    last_rear: Option<(Point2<f64>, Vector2<f64>)>,
 }
 
 impl Controller {
@@ -103,6 +107,7 @@ impl Controller {
             hint_rear: None,
             hint_front: None,
             hint_cp: None,
+            last_rear: None,
         })
     }
 
@@ -118,6 +123,7 @@ impl Controller {
         self.hint_rear = None;
         self.hint_front = None;
         self.hint_cp = None;
+        self.last_rear = None;
     }
 
     /// One step with the configured blend factor.
@@ -177,12 +183,19 @@ impl Controller {
         let h = measured.heading_vec();
         let front_pt: Point2<f64> = rear_pt + h * e;
 
-        let rear = path.project_with_no_curvature(&rear_pt, self.hint_rear);
+        // Hints moved on by the distance travelled since the last step; a
+        // projection then starts next to its foot point (Path::project_near).
+        let moved = self
+            .last_rear
+            .map_or(0.0, |(p, h_last)| (rear_pt - p).dot(&h_last));
+        self.last_rear = Some((rear_pt, h));
+        let near = |hint: Option<f64>| hint.map_or(f64::NAN, |s| s + moved);
+        let rear = path.project_near(&rear_pt, near(self.hint_rear));
         self.hint_rear = Some(rear.s);
         // Every controller projects the front axle: its error is reported.
         // Its curvature is only used (by the reverse Stanley feed-forward)
         // when driving backwards.
-        let mut front = path.project_with_no_curvature(&front_pt, self.hint_front);
+        let mut front = path.project_near(&front_pt, near(self.hint_front));
         if dir == crate::vehicle::Direction::Backward {
             front.curvature_per_m = path.curvature_at(front.s);
         }
@@ -218,7 +231,8 @@ impl Controller {
         let steering = raw.clamp(-self.max_steering_rad, self.max_steering_rad);
 
         let cp_pt = rear_pt + h * (alpha * e);
-        let cp = path.project_with(&cp_pt, self.hint_cp.or(Some(rear.s)));
+        let mut cp = path.project_near(&cp_pt, self.hint_cp.map_or(rear.s + alpha * e, |s| s + moved));
+        cp.curvature_per_m = path.curvature_at(cp.s);
         self.hint_cp = Some(cp.s);
         let th_travel = travel_heading(measured.theta_rad, dir);
 

@@ -1021,8 +1021,7 @@ impl RouteFleet {
                     .fleet
                     .track(self.fleet.vehicle_track(slot as i64)? as i64)?
                     .path;
-                path.project_with_no_curvature(&Point2::new(xf, yf), Some(d.s_front_m + v * dt_s))
-                    .s
+                path.project_near(&Point2::new(xf, yf), d.s_front_m + v * dt_s).s
             } else {
                 f64::NAN
             };

@@ -61,6 +61,13 @@ fn windowed_projection_equals_brute_force_near_the_track() {
             let fast = p.project_hinted(&q, hint);
             let full = p.project(&q);
             let brute = p.project_brute_force(&q);
+            // The descent from a predicted hint (the controller moves its
+            // hints on by the distance travelled: here, the 2.7 m step).
+            let near = p.project_near(&q, hint + 2.7);
+            assert!(
+                (near.lateral_m.abs() - brute.lateral_m.abs()).abs() < 1e-9,
+                "{name} s={s}: near {near:?} vs brute {brute:?}"
+            );
             assert!(
                 (fast.lateral_m.abs() - brute.lateral_m.abs()).abs() < 1e-9,
                 "{name} s={s}: hinted {fast:?} vs brute {brute:?}"
@@ -109,12 +116,21 @@ fn hinted_projection_does_not_jump_to_the_other_leg_of_a_hairpin() {
         (hinted.s - 50.0).abs() < 1e-9 && (hinted.lateral_m - 4.0).abs() < 1e-9,
         "{hinted:?}"
     );
+    let near = p.project_near(&q, 49.0);
+    assert!(
+        (near.s - 50.0).abs() < 1e-9 && (near.lateral_m - 4.0).abs() < 1e-9,
+        "{near:?}"
+    );
     // Driving along the first leg step by step keeps the first leg.
-    let mut hint = 0.0;
+    let (mut hint, mut hint_near) = (0.0, 0.0);
     for i in 0..90 {
-        let pr = p.project_hinted(&Point2::new(i as f64 + 0.3, 3.9), hint);
+        let q = Point2::new(i as f64 + 0.3, 3.9);
+        let pr = p.project_hinted(&q, hint);
         assert!(pr.s < 100.0, "step {i}: jumped to {}", pr.s);
         hint = pr.s;
+        let pn = p.project_near(&q, hint_near + 1.0);
+        assert!(pn.s < 100.0, "step {i}: the descent jumped to {}", pn.s);
+        hint_near = pn.s;
     }
 }
 
@@ -124,6 +140,18 @@ fn hinted_projection_catches_up_after_a_long_jump() {
     let p = Path::straight(1000.0, 2.0).unwrap();
     let pr = p.project_hinted(&Point2::new(600.0, 1.0), 10.0);
     assert!((pr.s - 600.0).abs() < 1e-9, "{pr:?}");
+    let pr = p.project_near(&Point2::new(600.0, 1.0), 10.0);
+    assert!((pr.s - 600.0).abs() < 1e-9, "the descent too: {pr:?}");
+    // On a closed path it goes round the seam, both ways.
+    let c = Path::circle(20.0, 1e-3).unwrap();
+    for (q, hint) in [(Point2::new(20.5, -0.3), 1.0), (Point2::new(20.5, 0.3), c.length() - 1.0)] {
+        let a = c.project_near(&q, hint);
+        let b = c.project_brute_force(&q);
+        assert!(c.arc_delta(a.s, b.s).abs() < 1e-9, "{a:?} vs {b:?}");
+    }
+    // A NaN hint is the full search.
+    let pr = p.project_near(&Point2::new(321.0, -2.0), f64::NAN);
+    assert!((pr.s - 321.0).abs() < 1e-9 && (pr.lateral_m + 2.0).abs() < 1e-9);
 }
 
 #[test]
