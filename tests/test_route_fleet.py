@@ -147,3 +147,30 @@ def test_plan_sumo_sparse_reads_must_index_the_slots() -> None:
         f.plan_sumo(s, [None], lambda vid: 0.0, [3], [0], [1.0])
     with pytest.raises(blendtrack.InputError, match="read_pos"):
         f.plan_sumo(s, [None], lambda vid: 0.0, [0], [0], [])
+
+
+def test_leaders_on_lanes_feed_the_next_plan_sumo_of_the_same_slots() -> None:
+    f, track = _fleet()
+    s = [_add(f, track, x, 10.0, name=f"c{k}") for k, x in enumerate((20.0, 50.0, 80.0))]
+    _step(f, s)  # the first (placing) moves make the places known
+    lanes = f.lanes_with_followers(s).tolist()
+    assert lanes == [0]
+    # Lane 0 back to front: c0, a background car, c1, c2.
+    ask = f.leaders_on_lanes(s, lanes, [["c0", "bg", "c1", "c2"]]).tolist()
+    assert ask == [0, 2], "c0 follows a background car, c2 is first on its lane"
+    listed = f.listed_leaders()
+    assert listed[0] is None and listed[2] is None and listed[1] is not None and listed[1][0] == "c2"
+    f.plan_sumo(s, [("bg", 5.0), None], lambda vid: 4.0, leader_index=ask)
+    out = f.step([], 0.1)
+    assert out["accel_mps2"][0] < out["accel_mps2"][2], "c0 brakes for the slow background car"
+    # leader_index without a matching leaders_on_lanes call is an error, not a guess.
+    with pytest.raises(blendtrack.InputError, match="leaders_on_lanes"):
+        f.plan_sumo(s, [None, None], lambda vid: 0.0, leader_index=[0, 2])
+    f.leaders_on_lanes(s, lanes, [["c0", "c1", "c2"]])
+    with pytest.raises(blendtrack.InputError, match="slots differ"):
+        f.plan_sumo(s[:2], [None], lambda vid: 0.0, leader_index=[0])
+    f.leaders_on_lanes(s, lanes, [["c0", "c1", "c2"]])
+    with pytest.raises(blendtrack.InputError, match=r"leader_index\[0\] = 7"):
+        f.plan_sumo(s, [None], lambda vid: 0.0, leader_index=[7])
+    with pytest.raises(blendtrack.InputError, match="not a string"):
+        f.leaders_on_lanes(s, lanes, [["c0", 3]])

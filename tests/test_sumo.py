@@ -240,6 +240,41 @@ def test_sumo_has_each_controlled_vehicle_where_blendtrack_has_it(tmp_path: Path
     assert result.summary["moves_speed_only"] + result.summary["moves_none"] > 0.8 * sum(r.steps for r in result.records)
 
 
+def test_leaders_read_off_lane_lists_are_the_ones_sumo_gives(tmp_path: Path) -> None:
+    """Where controlled vehicles follow each other, their leaders come from
+    SUMO's lane lists instead of one getLeader call each: the same leaders
+    and gaps as SUMO's getLeader, every step (highway, every vehicle
+    controlled: long platoons, lane changes, the merge)."""
+    sc = sumo.resolve_scenario("highway_onramp")
+    opts = RunOptions(controlled_fraction=1.0, end_s=150, progress=False, sumo_args=("--scale", "2"))
+    run = SumoRun(sc, opts, tmp_path)
+    compared = [0, 0]  # vehicles compared, of which read off a lane list
+
+    def compare(r: SumoRun, t: float) -> None:
+        if not r.active:
+            return
+        r._refresh_order()
+        present = set(r.sumo.vehicle.getIDList())
+        if any(vid not in present for vid in r._ids):
+            return  # arrivals are dropped after the hooks
+        lanes = r.fleet.lanes_with_followers(r._slots).tolist()
+        ask = r.fleet.leaders_on_lanes(r._slots, lanes, [r._lane_vehicles(r._lanes.name(x)) for x in lanes]).tolist()
+        listed = r.fleet.listed_leaders()
+        for i, vid in enumerate(r._ids):
+            want = r._get_leader(vid, 250.0)  # libsumo's own call, ("", -1) for none
+            if listed[i] is None:
+                assert i in ask
+                continue
+            got = listed[i]
+            assert got[0] == want[0] and abs(got[1] - want[1]) < 1e-6, (t, vid, got, want)
+            compared[1] += 1
+        compared[0] += len(r._ids)
+
+    run.step_hooks.append(compare)
+    run.run()
+    assert compared[0] > 20_000 and compared[1] > 0.5 * compared[0], compared
+
+
 def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -> None:
     sc = sumo.resolve_scenario("urban_grid")
     run = SumoRun(sc, RunOptions(end_s=150, progress=False), tmp_path)

@@ -46,7 +46,6 @@ import math
 import os
 import time
 from collections.abc import Callable, Iterable
-from itertools import repeat
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -413,6 +412,8 @@ class SumoRun:
         self._move_to = pick("moveTo")
         self._move_to_xy = pick("moveToXY")
         self._lane_change_state = pick("getLaneChangeState")
+        lane_ids = getattr(raw, "lane_getLastStepVehicleIDs", None)
+        self._lane_vehicles = lane_ids if callable(lane_ids) else self.sumo.lane.getLastStepVehicleIDs
 
     def _check_loads(self) -> None:
         import subprocess
@@ -748,7 +749,7 @@ class SumoRun:
             self._index = {vid: i for i, vid in enumerate(self._ids)}
             self._order_dirty = False
 
-    def _observe(self, t: float) -> tuple[list[Any], list[int], list[int], list[float]]:
+    def _observe(self, t: float) -> tuple[tuple[list[int] | None, list[Any]], list[int], list[int], list[float]]:
         """Leaders, and where needed lane positions, of every controlled
         vehicle still in the simulation, in ``self._order``; drops the ones
         that vanished without an event.
@@ -765,18 +766,17 @@ class SumoRun:
         if self._use_subscriptions:
             return self._observe_subscribed(t)
         self._refresh_order()
-        ids = self._ids
         try:
-            leaders = list(map(self._get_leader, ids, repeat(LEADER_RANGE_M, len(ids))))
+            asked, leaders = self._leaders()
         except Exception:
             # Removed by another client (or otherwise gone) without an event.
             present = set(self.sumo.vehicle.getIDList())
-            for vid in [x for x in ids if x not in present]:
+            for vid in [x for x in self._ids if x not in present]:
                 self.counts["vanished"] += 1
                 self._drop(vid, t, "vanished")
             self._refresh_order()
-            ids = self._ids
-            leaders = list(map(self._get_leader, ids, repeat(LEADER_RANGE_M, len(ids))))
+            asked, leaders = self._leaders()
+        ids = self._ids
         get_route = self._get_route_id
         for act in self._order[self._steps % ROUTE_CHECK_EVERY :: ROUTE_CHECK_EVERY]:
             if get_route(act.vid) != act.route_id:
@@ -786,10 +786,36 @@ class SumoRun:
         read = [(i, vid) for vid in self._read_position if (i := index.get(vid)) is not None]
         lanes = [lane_id(get_lane(vid)) for _, vid in read]
         poss = [get_pos(vid) for _, vid in read]
-        self._changing_leaders(leaders)
-        return leaders, [i for i, _ in read], lanes, poss
+        if self._changing:
+            # The lane changers' leaders need SUMO's word (and a look at the target lane).
+            index = self._index
+            pos = {i: k for k, i in enumerate(asked)}
+            for act in self._changing.values():
+                i = index[act.vid]
+                if i not in pos:
+                    pos[i] = len(asked)
+                    asked.append(i)
+                    leaders.append(self._get_leader(act.vid, LEADER_RANGE_M))
+            self._changing_leaders(leaders, pos)
+        return (asked, leaders), [i for i, _ in read], lanes, poss
 
-    def _observe_subscribed(self, t: float) -> tuple[list[Any], list[int], list[int], list[float]]:
+    def _leaders(self) -> tuple[list[int] | None, list[Any]]:
+        """Every controlled vehicle's leader as ``vehicle.getLeader`` gives it:
+        (the indices of the ones asked, their leaders); RouteFleet keeps the others.
+        Where controlled vehicles follow each other on a lane, SUMO's list of
+        the lane's vehicles (back to front) says so at once: the one in front
+        is the leader, and the gap is SUMO's own (RouteFleet knows both
+        places), so only the others are asked (first on their lane, behind a
+        vehicle SUMO drives, place not known): one call per such lane instead
+        of one per vehicle."""
+        fleet, ids = self.fleet, self._ids
+        lanes = fleet.lanes_with_followers(self._slots).tolist()
+        names, lane_vehicles = self._lanes.names, self._lane_vehicles
+        ask = fleet.leaders_on_lanes(self._slots, lanes, [lane_vehicles(names[lane]) for lane in lanes]).tolist()
+        get_leader = self._get_leader
+        return ask, [get_leader(ids[i], LEADER_RANGE_M) for i in ask]
+
+    def _observe_subscribed(self, t: float) -> tuple[tuple[list[int] | None, list[Any]], list[int], list[int], list[float]]:
         """``_observe`` over TraCI: everything from the vehicle subscriptions."""
         tc = self._tc
         res = self.sumo.vehicle.getAllSubscriptionResults()
@@ -807,14 +833,17 @@ class SumoRun:
         leaders = [r.get(tc.VAR_LEADER) for r in rows]
         lanes = [lane_id(r.get(tc.VAR_LANE_ID, "")) for r in rows]
         poss = [float(r.get(tc.VAR_LANEPOSITION, math.nan)) for r in rows]
-        self._changing_leaders(leaders)
-        return leaders, list(range(len(rows))), lanes, poss
+        self._changing_leaders(leaders, None)
+        return (None, leaders), list(range(len(rows))), lanes, poss
 
-    def _changing_leaders(self, leaders: list[Any]) -> None:
+    def _changing_leaders(self, leaders: list[Any], pos: dict[int, int] | None) -> None:
+        """The lane changers' leaders (``leaders[pos[i]]`` for the vehicle at
+        index i, or ``leaders[i]`` when all are listed)."""
         index = self._index
         for act in list(self._changing.values()):
             i = index[act.vid]
-            leaders[i] = self._changing_leader(act, leaders[i])
+            k = i if pos is None else pos[i]
+            leaders[k] = self._changing_leader(act, leaders[k])
 
     def _set_changing(self, act: _Active, changing: tuple[int, int] | None) -> None:
         act.changing = changing
@@ -863,7 +892,8 @@ class SumoRun:
         if not self._ids:
             return
         ids, order, fleet = self._ids, self._order, self.fleet
-        queries = fleet.plan_sumo(self._slots, leaders, self._get_speed, read, lanes, poss).tolist()
+        asked, leaders = leaders
+        queries = fleet.plan_sumo(self._slots, leaders, self._get_speed, read, lanes, poss, asked).tolist()
         answers = [self._must_yield(ids[i], order[i].slot) for i in queries]
         out = fleet.step(np.array(answers, dtype=bool), self.dt)
         self._apply(t, ids, order, out)

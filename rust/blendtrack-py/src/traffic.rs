@@ -20,6 +20,7 @@ use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 
 type F64In<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
 type I64In<'py> = PyArrayLike1<'py, i64, AllowTypeChange>;
@@ -87,8 +88,29 @@ pub struct RouteFleet {
     inner: CoreRouteFleet,
     /// The simulator's vehicle ids of the slots that were given one, both
     /// ways (`plan_sumo` reads leaders by id).
-    slot_of: HashMap<String, i64>,
+    slot_of: HashMap<String, i64, BuildHasherDefault<Fnv>>,
     name_of: Vec<Option<String>>,
+    /// What `leaders_on_lanes` found for the slots it was given, kept for
+    /// the next `plan_sumo` with the same slots: (slots, leader per slot).
+    listed: Option<(Vec<i64>, Vec<Option<(i64, f64)>>)>,
+}
+
+/// FNV-1a: SUMO's vehicle ids are short strings hashed a few thousand times
+/// a step; the default SipHash (DoS-resistant, slower) is not needed here.
+#[derive(Default)]
+struct Fnv(u64);
+
+impl Hasher for Fnv {
+    fn write(&mut self, bytes: &[u8]) {
+        let mut h = if self.0 == 0 { 0xcbf2_9ce4_8422_2325 } else { self.0 };
+        for &b in bytes {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+        self.0 = h;
+    }
+    fn finish(&self) -> u64 {
+        self.0
+    }
 }
 
 #[pymethods]
@@ -134,8 +156,9 @@ impl RouteFleet {
         })?;
         Ok(RouteFleet {
             inner,
-            slot_of: HashMap::new(),
+            slot_of: HashMap::default(),
             name_of: Vec::new(),
+            listed: None,
         })
     }
 
@@ -426,7 +449,11 @@ impl RouteFleet {
     /// leader whose speed cannot be read counts as standing). The lanes and
     /// lane positions read from the simulator are given sparsely: for the
     /// vehicles at `read_index` (indices into `slots`).
-    #[pyo3(signature = (slots, leaders, speed_of, read_index = None, read_lane = None, read_pos = None))]
+    ///
+    /// With `leader_index`, `leaders` holds only the entries at those indices
+    /// (the ones `leaders_on_lanes` could not read off the lane lists, for
+    /// these same `slots`); the others are the ones it found.
+    #[pyo3(signature = (slots, leaders, speed_of, read_index = None, read_lane = None, read_pos = None, leader_index = None))]
     #[allow(clippy::too_many_arguments)]
     fn plan_sumo<'py>(
         &mut self,
@@ -437,32 +464,71 @@ impl RouteFleet {
         read_index: Option<I64In<'py>>,
         read_lane: Option<I64In<'py>>,
         read_pos: Option<F64In<'py>>,
+        leader_index: Option<I64In<'py>>,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let sl = vec_of(&slots);
         let n = sl.len();
         let items: Vec<Bound<'py, PyAny>> = leaders.try_iter()?.collect::<PyResult<_>>()?;
-        same_len("leaders", n, items.len())?;
         let mut gaps = vec![f64::NAN; n];
         let mut lslots = vec![-1i64; n];
         let mut lspeeds = vec![f64::NAN; n];
-        for (i, item) in items.iter().enumerate() {
+        let listed = self.listed.take();
+        let at: Vec<usize> = match &leader_index {
+            None => {
+                same_len("leaders", n, items.len())?;
+                (0..n).collect()
+            }
+            Some(idx) => {
+                let Some((listed_slots, found)) = listed else {
+                    return Err(input_error(
+                        "leader_index given without a leaders_on_lanes call for these slots before".to_string(),
+                    ));
+                };
+                if listed_slots != sl {
+                    return Err(input_error(
+                        "leader_index: the slots differ from the last leaders_on_lanes call".to_string(),
+                    ));
+                }
+                for (i, f) in found.into_iter().enumerate() {
+                    if let Some((l, gap)) = f {
+                        gaps[i] = gap;
+                        lslots[i] = l;
+                    }
+                }
+                let idx = vec_of(idx);
+                same_len("leaders", idx.len(), items.len())?;
+                idx.iter()
+                    .enumerate()
+                    .map(|(k, &i)| {
+                        usize::try_from(i).ok().filter(|&i| i < n).ok_or_else(|| {
+                            input_error(format!("leader_index[{k}] = {i}: not an index into slots"))
+                        })
+                    })
+                    .collect::<PyResult<_>>()?
+            }
+        };
+        for (k, item) in items.iter().enumerate() {
+            let i = at[k];
+            // An entry given here is the leader, whatever the lane lists said.
+            gaps[i] = f64::NAN;
+            lslots[i] = -1;
             if item.is_none() {
                 continue;
             }
             let t = item.cast::<PyTuple>().map_err(|_| {
-                input_error(format!("leaders[{i}] is not None or an (id, gap) tuple"))
+                input_error(format!("leaders[{k}] is not None or an (id, gap) tuple"))
             })?;
             if t.len() != 2 {
-                return Err(input_error(format!("leaders[{i}] has {} items, expected 2 (id, gap)", t.len())));
+                return Err(input_error(format!("leaders[{k}] has {} items, expected 2 (id, gap)", t.len())));
             }
             let id = t.get_item(0)?;
             let id = id
                 .cast::<PyString>()
-                .map_err(|_| input_error(format!("leaders[{i}]: the id is not a string")))?;
+                .map_err(|_| input_error(format!("leaders[{k}]: the id is not a string")))?;
             let gap: f64 = t
                 .get_item(1)?
                 .extract()
-                .map_err(|_| input_error(format!("leaders[{i}]: the gap is not a number")))?;
+                .map_err(|_| input_error(format!("leaders[{k}]: the gap is not a number")))?;
             let name = id.to_str()?;
             if name.is_empty() || !(gap >= -100.0) {
                 continue;
@@ -507,6 +573,77 @@ impl RouteFleet {
             .map(|i| i as i64)
             .collect::<Vec<_>>()
             .into_pyarray(py))
+    }
+
+    /// The lanes (the caller's ids) on which at least two of `slots` are where
+    /// blendtrack knows the simulator has them: the lanes worth listing for
+    /// `leaders_on_lanes`.
+    fn lanes_with_followers<'py>(&self, py: Python<'py>, slots: I64In<'py>) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let sl = vec_of(&slots);
+        let lanes = self.inner.lanes_with_followers(&sl).map_err(traffic_error)?;
+        Ok(lanes.into_iter().map(i64::from).collect::<Vec<_>>().into_pyarray(py))
+    }
+
+    /// Leaders read off SUMO's `lane.getLastStepVehicleIDs` of `lanes` (one
+    /// sequence of vehicle ids per lane, back to front): for each entry of
+    /// `slots`, the leader and gap `vehicle.getLeader` would give when the
+    /// vehicle in front of it on its lane is one added here with a name and
+    /// both places are known. They are kept for the next `plan_sumo` with
+    /// these `slots` and `leader_index`; returns the indices (into `slots`)
+    /// of the vehicles whose leader only SUMO can tell.
+    fn leaders_on_lanes<'py>(
+        &mut self,
+        py: Python<'py>,
+        slots: I64In<'py>,
+        lanes: I64In<'py>,
+        vehicles: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let sl = vec_of(&slots);
+        let ln = vec_of(&lanes);
+        let mut lists = Vec::with_capacity(ln.len());
+        for (k, seq) in vehicles.try_iter()?.enumerate() {
+            let seq = seq?;
+            let mut list = Vec::with_capacity(seq.len().unwrap_or(0));
+            for id in seq.try_iter()? {
+                let id = id?;
+                let id = id
+                    .cast::<PyString>()
+                    .map_err(|_| input_error(format!("vehicles[{k}]: an id is not a string")))?;
+                list.push(self.slot_of.get(id.to_str()?).copied());
+            }
+            lists.push(list);
+        }
+        let lanes_u32 = ln
+            .iter()
+            .enumerate()
+            .map(|(i, &l)| u32_of("lanes", i, l))
+            .collect::<PyResult<Vec<u32>>>()?;
+        let found = self
+            .inner
+            .leaders_on_lanes(&sl, &lanes_u32, &lists)
+            .map_err(traffic_error)?;
+        let ask: Vec<i64> = (0..found.len())
+            .filter(|&i| found[i].is_none())
+            .map(|i| i as i64)
+            .collect();
+        self.listed = Some((sl, found));
+        Ok(ask.into_pyarray(py))
+    }
+
+    /// What the last `leaders_on_lanes` read off the lane lists, per slot:
+    /// `(leader id, gap)`, or None where SUMO must be asked (for inspection;
+    /// `plan_sumo` uses them itself).
+    fn listed_leaders<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyList>> {
+        let out = pyo3::types::PyList::empty(py);
+        if let Some((_, found)) = &self.listed {
+            for f in found {
+                match f.and_then(|(l, gap)| self.name_of.get(l as usize).and_then(Option::as_ref).map(|n| (n, gap))) {
+                    Some((name, gap)) => out.append((name.as_str(), gap))?,
+                    None => out.append(py.None())?,
+                }
+            }
+        }
+        Ok(out)
     }
 
     /// Second half of a step: `must_yield[j]` answers the j-th index `plan`

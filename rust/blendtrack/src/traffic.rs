@@ -529,6 +529,37 @@ pub struct RouteOutputs {
     pub sumo_speed_mps: Vec<f64>,
 }
 
+impl RouteOutputs {
+    /// Empty columns with room for `n` vehicles (no growing in the step loop).
+    fn with_capacity(n: usize) -> Self {
+        RouteOutputs {
+            moves: Vec::with_capacity(n),
+            lane: Vec::with_capacity(n),
+            lane_pos_m: Vec::with_capacity(n),
+            edge: Vec::with_capacity(n),
+            lane_index: Vec::with_capacity(n),
+            x_front_m: Vec::with_capacity(n),
+            y_front_m: Vec::with_capacity(n),
+            angle_deg: Vec::with_capacity(n),
+            x_m: Vec::with_capacity(n),
+            y_m: Vec::with_capacity(n),
+            theta_rad: Vec::with_capacity(n),
+            v_mps: Vec::with_capacity(n),
+            delta_rad: Vec::with_capacity(n),
+            accel_mps2: Vec::with_capacity(n),
+            lateral_error_m: Vec::with_capacity(n),
+            heading_error_rad: Vec::with_capacity(n),
+            s_rear_m: Vec::with_capacity(n),
+            curvature_per_m: Vec::with_capacity(n),
+            virtual_obstacle_m: Vec::with_capacity(n),
+            red_light: Vec::with_capacity(n),
+            lane_change_due: Vec::with_capacity(n),
+            read_position: Vec::with_capacity(n),
+            sumo_speed_mps: Vec::with_capacity(n),
+        }
+    }
+}
+
 /// A [`Fleet`] driving road routes (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct RouteFleet {
@@ -780,6 +811,79 @@ impl RouteFleet {
         Ok(())
     }
 
+    /// The lanes on which at least two of `slots` are, where blendtrack knows
+    /// where the simulator has them (sorted, each once): the lanes whose
+    /// vehicle lists [`RouteFleet::leaders_on_lanes`] can read leaders from.
+    pub fn lanes_with_followers(&self, slots: &[i64]) -> Result<Vec<u32>, TrafficError> {
+        let mut lanes = Vec::with_capacity(slots.len());
+        for &slot in slots {
+            if let Some((lane, _)) = self.driven(slot)?.known {
+                lanes.push(lane);
+            }
+        }
+        lanes.sort_unstable();
+        let mut out = Vec::new();
+        let mut k = 0;
+        while k < lanes.len() {
+            let j = lanes[k..].iter().take_while(|&&l| l == lanes[k]).count();
+            if j >= 2 {
+                out.push(lanes[k]);
+            }
+            k += j;
+        }
+        Ok(out)
+    }
+
+    /// Leaders read off the simulator's lists of the vehicles on lanes (back
+    /// to front; an entry is the slot of a vehicle driven here, or None for
+    /// any other): where a listed slot's lane is one of `lanes` and the
+    /// vehicle in front of it there is one driven here whose place is known,
+    /// its leader is that vehicle and the gap is the simulator's (the
+    /// leader's back minus the front minus minGap), exactly what the
+    /// simulator's own leader query gives for a leader on the same lane.
+    /// Returns, per entry of `slots`, (leader slot, gap) or None where only
+    /// the simulator can tell (first on its lane, a leader not driven here,
+    /// a place not known or not where the list has it).
+    pub fn leaders_on_lanes(
+        &self,
+        slots: &[i64],
+        lanes: &[u32],
+        vehicles: &[Vec<Option<i64>>],
+    ) -> Result<Vec<Option<(i64, f64)>>, TrafficError> {
+        check_len("vehicles", lanes.len(), vehicles.len())?;
+        let mut index = vec![usize::MAX; self.driven.len()];
+        for (i, &slot) in slots.iter().enumerate() {
+            self.driven(slot)?;
+            index[slot as usize] = i;
+        }
+        let known_on = |slot: i64, lane: u32| -> Option<&Driven> {
+            let d = usize::try_from(slot)
+                .ok()
+                .and_then(|s| self.driven.get(s))
+                .and_then(Option::as_ref)?;
+            matches!(d.known, Some((l, _)) if l == lane).then_some(d)
+        };
+        let mut out = vec![None; slots.len()];
+        for (&lane, list) in lanes.iter().zip(vehicles) {
+            for pair in list.windows(2) {
+                let (Some(f), Some(l)) = (pair[0], pair[1]) else {
+                    continue;
+                };
+                let Some(&i) = usize::try_from(f).ok().and_then(|f| index.get(f)) else {
+                    continue;
+                };
+                if i == usize::MAX {
+                    continue;
+                }
+                if let (Some(df), Some(dl)) = (known_on(f, lane), known_on(l, lane)) {
+                    let (pf, pl) = (df.known.expect("matched").1, dl.known.expect("matched").1);
+                    out[i] = Some((l, pl - dl.body.length_m - pf - df.body.min_gap_m));
+                }
+            }
+        }
+        Ok(out)
+    }
+
     /// Takes the `(|curvature|, |v|, |e|, |lateral acceleration|)` samples kept so far.
     pub fn take_samples(&mut self) -> Vec<[f64; 4]> {
         std::mem::take(&mut self.samples)
@@ -984,7 +1088,7 @@ impl RouteFleet {
         };
         let out = self.fleet.step(&inputs)?;
         let next = out.next.expect("dt was given");
-        let mut r = RouteOutputs::default();
+        let mut r = RouteOutputs::with_capacity(n);
         let st = self.settings;
         for i in 0..n {
             let slot = plan.slots[i] as usize;
@@ -1975,6 +2079,35 @@ mod tests {
             read = sim_step(&mut f, a, &mut sim, read).read_position[0];
         }
         assert!((sim.pos - want).abs() < 1e-3, "simulator drifted to {} vs {want}", sim.pos);
+    }
+
+    #[test]
+    fn leaders_come_off_the_lane_lists_where_both_places_are_known() {
+        let (mut f, t) = fleet_on(road(None, true));
+        // Three on lane 10 (30, 60, 90 m rear axles), known to the simulator
+        // after one step; one more not yet known.
+        let s: Vec<i64> = [30.0, 60.0, 90.0]
+            .iter()
+            .map(|&x| f.add_vehicle(t, None, None, body(), at(x, 10.0)).unwrap() as i64)
+            .collect();
+        step(&mut f, &s, false);
+        let late = f.add_vehicle(t, None, None, body(), at(120.0, 10.0)).unwrap() as i64;
+        let all = [s[0], s[1], s[2], late];
+        assert_eq!(f.lanes_with_followers(&all).unwrap(), vec![10]);
+        let pos = |slot: i64| f.driven(slot).unwrap().known.unwrap().1;
+        // The simulator's list of lane 10, back to front: a background
+        // vehicle sits between s[1] and s[2].
+        let list = vec![Some(s[0]), Some(s[1]), None, Some(s[2]), Some(late)];
+        let got = f.leaders_on_lanes(&all, &[10], &[list]).unwrap();
+        let gap = pos(s[1]) - 4.5 - pos(s[0]) - 2.5;
+        assert_eq!(got[0], Some((s[1], gap)));
+        assert_eq!(got[1], None, "a background leader: the simulator tells");
+        assert_eq!(got[2], None, "the leader's place is not known yet");
+        assert_eq!(got[3], None, "first on its lane");
+        // A list of another lane than the one blendtrack knows: nothing read off it.
+        let got = f.leaders_on_lanes(&all, &[11], &[vec![Some(s[0]), Some(s[1])]]).unwrap();
+        assert!(got.iter().all(Option::is_none));
+        assert!(f.leaders_on_lanes(&all, &[10, 11], &[vec![]]).is_err());
     }
 
     #[test]
