@@ -172,10 +172,12 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
         k = np.linspace(kmax / 200, kmax, 200)
         ax.plot(k, np.sqrt(comfort / k), "k--", lw=1, label=f"v = sqrt({comfort:g} / |curvature|)")
         ax.set_ylim(0, max(float(samples[:, 1].max()) * 1.1, 1.0))
+        ax.legend(loc="upper right", fontsize=8)
+    else:
+        ax.text(0.5, 0.5, "no controlled vehicle", ha="center", va="center", transform=ax.transAxes)
     ax.set_xlabel("|path curvature| (1/m)")
     ax.set_ylabel("speed (m/s)")
     ax.set_title("Speed against curvature")
-    ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     files.append(out / "speed_vs_curvature.png")
     fig.savefig(files[-1], dpi=110)

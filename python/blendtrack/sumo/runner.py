@@ -906,12 +906,17 @@ class SumoRun:
         speeds = out["sumo_speed_mps"]
         failed: list[int] = []
         set_speed, move_to, move_xy = self._set_speed, self._move_to, self._move_to_xy
-        idx = np.flatnonzero(moves == _SPEED)
-        for i, sp in zip(idx.tolist(), speeds[idx].tolist()):
-            try:
-                set_speed(ids[i], sp)
-            except Exception:
-                failed.append(i)
+        idx = np.flatnonzero(moves == _SPEED).tolist()
+        try:
+            # The bulk: one call each, no per-vehicle Python beyond it.
+            list(map(set_speed, map(ids.__getitem__, idx), speeds[idx].tolist()))
+        except Exception:
+            # A vehicle gone (removed by another client): find which, one by one.
+            for i, sp in zip(idx, speeds[idx].tolist()):
+                try:
+                    set_speed(ids[i], sp)
+                except Exception:
+                    failed.append(i)
         self.moves["speed"] += len(idx)
         self.moves["none"] += int(np.count_nonzero(moves == _HOLD))
         lane_names = self._lanes.names
@@ -945,12 +950,15 @@ class SumoRun:
             stop = self.fleet.next_stop(acts[i].slot)
             light = self._lights.name(stop[1]) if stop is not None and stop[1] >= 0 else ""
             self.violations.append((t, ids[i], light, stop[2] if stop else -1, stop[0] if stop else math.nan))
-        due = np.flatnonzero(out["lane_change_due"]).tolist()
-        if due:
-            lane, v, dt = out["lane"], out["v_mps"], self.dt
+        due = np.flatnonzero(out["lane_change_due"])
+        if len(due):
+            v = out["v_mps"][due]
             # Where SUMO will have the front after its movement over the step:
             # the new front position (lane_pos_m is it minus v dt).
-            self._lane_change_due = [(ids[i], int(lane[i]), float(out["lane_pos_m"][i] + v[i] * dt), float(v[i])) for i in due]
+            front = (out["lane_pos_m"][due] + v * self.dt).tolist()
+            self._lane_change_due = [
+                (ids[i], lane, pos, sp) for i, lane, pos, sp in zip(due.tolist(), out["lane"][due].tolist(), front, v.tolist())
+            ]
         if self._tracing:
             cols = [out[k] for k in ("x_front_m", "y_front_m", "v_mps", "lateral_error_m", "curvature_per_m")]
             index = self._index

@@ -780,6 +780,18 @@ impl Path {
         self.make_projection_flat(p, k, t, d2)
     }
 
+    /// The arc length of [`Self::project_near`]'s foot point alone (no
+    /// heading, side or curvature).
+    pub fn arc_near(&self, p: &Point2<f64>, hint_s: f64) -> f64 {
+        let (_, k, t) = self.nearest_near(p, hint_s);
+        let s = self.s[k] + t;
+        if self.closed && s >= self.length {
+            s - self.length
+        } else {
+            s
+        }
+    }
+
     fn nearest_near(&self, p: &Point2<f64>, hint_s: f64) -> (f64, usize, f64) {
         if !hint_s.is_finite() {
             return self.nearest_full(p);

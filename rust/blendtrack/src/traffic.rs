@@ -1128,7 +1128,7 @@ impl RouteFleet {
                     .fleet
                     .track(self.fleet.vehicle_track(slot as i64)? as i64)?
                     .path;
-                path.project_near(&Point2::new(xf, yf), d.s_front_m + v * dt_s).s
+                path.arc_near(&Point2::new(xf, yf), d.s_front_m + v * dt_s)
             } else {
                 f64::NAN
             };

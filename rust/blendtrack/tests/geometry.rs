@@ -64,6 +64,7 @@ fn windowed_projection_equals_brute_force_near_the_track() {
             // The descent from a predicted hint (the controller moves its
             // hints on by the distance travelled: here, the 2.7 m step).
             let near = p.project_near(&q, hint + 2.7);
+            assert_eq!(p.arc_near(&q, hint + 2.7), near.s);
             assert!(
                 (near.lateral_m.abs() - brute.lateral_m.abs()).abs() < 1e-9,
                 "{name} s={s}: near {near:?} vs brute {brute:?}"
