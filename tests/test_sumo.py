@@ -275,6 +275,26 @@ def test_leaders_read_off_lane_lists_are_the_ones_sumo_gives(tmp_path: Path) -> 
     assert compared[0] > 20_000 and compared[1] > 0.5 * compared[0], compared
 
 
+def test_border_margin_widens_the_virtual_borders_and_eases_the_curves(tmp_path: Path) -> None:
+    """The virtual borders are the lane's width plus a margin: wider borders
+    let the ray cast see further through the rural loop's curves, so the
+    curvature-aware law slows the same vehicles less."""
+    sc = sumo.resolve_scenario("rural_loop")
+    runs = {}
+    for margin in (0.0, 3.0):
+        run = SumoRun(sc, RunOptions(end_s=150, progress=False, border_margin_m=margin), tmp_path / f"m{margin:g}")
+        runs[margin] = (run, run.run())
+    (narrow_run, narrow), (wide_run, wide) = runs[0.0], runs[3.0]
+    assert wide.summary["border_margin_m"] == 3.0
+    geo_n = next(iter(narrow_run._geo_cache.values()))[0]
+    geo_w = next(iter(wide_run._geo_cache.values()))[0]
+    assert abs(float(geo_w.widths[0, 0]) - float(geo_n.widths[0, 0]) - 3.0) < 1e-12
+    speed = {m: sum(r.sum_v for r in res.records) / sum(r.steps for r in res.records) for m, (_, res) in runs.items()}
+    assert speed[3.0] > 1.05 * speed[0.0], speed
+    with pytest.raises(sumo.ScenarioError, match="border margin"):
+        RunOptions(border_margin_m=-1.0)
+
+
 def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -> None:
     sc = sumo.resolve_scenario("urban_grid")
     run = SumoRun(sc, RunOptions(end_s=150, progress=False), tmp_path)
@@ -376,6 +396,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
         (lambda tmp: ["sumo", "run", "rural_loop", "--controlled-type", "robot", "--out", str(tmp / "o")], "robot"),
         (lambda tmp: ["sumo", "run", "rural_loop", "--controlled-fraction", "1.5", "--out", str(tmp / "o")], "fraction"),
         (lambda tmp: ["sumo", "run", "rural_loop", "--alpha", "-0.2", "--out", str(tmp / "o")], "alpha"),
+        (lambda tmp: ["sumo", "run", "rural_loop", "--border-margin", "-1", "--out", str(tmp / "o")], "border margin"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, make_args, expect: str) -> None:  # type: ignore[no-untyped-def]

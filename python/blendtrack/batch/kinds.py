@@ -131,6 +131,7 @@ def _run_options(task: dict[str, Any]) -> Any:
         controlled_fraction=p.get("controlled_fraction"),
         controlled_type=p.get("controlled_type"),
         max_controlled=p.get("max_controlled"),
+        border_margin_m=p.get("border_margin_m", 0.0),
         config=config,
         vehicle=vehicle,
         fixed_keys=frozenset(keys),

@@ -115,6 +115,7 @@ _OWN: tuple[Param, ...] = (
     Param("controlled_fraction", float, ("sumo", "compare"), "fraction of all vehicles controlled (penetration rate)", 0.0, 1.0),
     Param("controlled_type", str, ("sumo", "compare"), "control every vehicle of this vType"),
     Param("max_controlled", int, ("sumo",), "control at most this many vehicles", 0.0),
+    Param("border_margin_m", float, ("sumo", "compare"), "added to each side of a lane's half width for the virtual borders (m)", 0.0),
     Param("baseline", str, ("compare",), "car-following model of the baseline", choices=BASELINES),
 )
 

@@ -330,6 +330,7 @@ def route_geometry(
     smoothing_m: float = 1.5,
     defer_changes: bool = False,
     change: tuple[float, float] | None = None,
+    border_margin_m: float = 0.0,
 ) -> RouteGeometry:
     """Builds the reference track of a vehicle on ``edges`` starting in lane ``start_lane_index``.
 
@@ -340,7 +341,9 @@ def route_geometry(
     the path inward by about ``smoothing_m**2 / (2 R)`` (4 cm at R = 30 m).
     ``defer_changes`` and ``change`` control lane changes (see ``_pieces``):
     with ``defer_changes`` the track may stop at the end of a lane that does
-    not continue, and ``pending_change`` says where and to which lane.
+    not continue, and ``pending_change`` says where and to which lane. The
+    widths (the virtual borders) are each lane's half width plus
+    ``border_margin_m``.
     Raises :class:`blendtrack.PathError` for an empty or undrivable route.
     """
     if len(edges) == 0:
@@ -392,7 +395,7 @@ def route_geometry(
                 stops[j] = (*stops[j][:5], s)
         s += float(_arc(shape)[-1])
         pts.append(shape)
-        wid.append(np.full((len(shape), 2), pc.half_width_m))
+        wid.append(np.full((len(shape), 2), pc.half_width_m + border_margin_m))
         n_pts += len(shape)
         end.append(n_pts)
         last = shape[-1]

@@ -163,6 +163,16 @@ class RunOptions:
     #: Extra distance (m) kept to leaders and stop lines at standstill, on top
     #: of SUMO's minGap (SUMO counts a gap below minGap as a collision).
     standstill_margin_m: float = 1.0
+    #: Added (m, >= 0) to each side of every lane's half width for the
+    #: virtual borders (ignored when ``path_width_m`` is set): wider borders
+    #: let the ray cast see further through a curve, so the curvature-aware
+    #: law slows a vehicle less there.
+    border_margin_m: float = 0.0
+
+    def __post_init__(self) -> None:
+        m = self.border_margin_m
+        if not (isinstance(m, (int, float)) and math.isfinite(m) and m >= 0.0):
+            raise ScenarioError(f"border margin {m!r} m: must be a finite number >= 0")
 
 
 @dataclass
@@ -525,7 +535,10 @@ class SumoRun:
         key = (edges, lane_index)
         hit = self._geo_cache.get(key) if change is None else None
         if hit is None:
-            geo = route_geometry(self._net_geometry(), edges, lane_index, defer_changes=True, change=change)
+            geo = route_geometry(
+                self._net_geometry(), edges, lane_index, defer_changes=True, change=change,
+                border_margin_m=self.opt.border_margin_m,
+            )
             path = blendtrack.Path(geo.points, geo.widths, closed=False)
             lanes, edge_ids = self._lanes, self._edges
             stops = geo.stops
@@ -664,6 +677,7 @@ class SumoRun:
             "wall_time_s": wall,
             "steps_per_second": steps / wall if wall > 0 else math.nan,
             "comfort_lateral_accel_mps2": self.scenario.comfort_lateral_accel_mps2,
+            "border_margin_m": self.opt.border_margin_m,
             "moves_speed_only": self.moves["speed"],
             "moves_none": self.moves["none"],
             "moves_lane_position": self.moves["lane"],
