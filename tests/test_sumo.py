@@ -295,6 +295,45 @@ def test_border_margin_widens_the_virtual_borders_and_eases_the_curves(tmp_path:
         RunOptions(border_margin_m=-1.0)
 
 
+def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """libsumo crashes on some malformed networks, so a scenario is first
+    loaded in a child sumo; one that loaded before, byte for byte, is not
+    loaded again. A change to any of its files is a new check."""
+    import subprocess as sp
+
+    from blendtrack.sumo import runner
+
+    monkeypatch.setenv("BLENDTRACK_CACHE_DIR", str(tmp_path / "cache"))
+    folder = tmp_path / "ring"
+    shutil.copytree(SCENARIOS / "ring_single_lane", folder)
+    sc = sumo.resolve_scenario(str(folder))
+    children: list[list[str]] = []
+    real_run = sp.run
+
+    def counting_run(cmd, *a, **k):  # type: ignore[no-untyped-def]
+        children.append(list(cmd))
+        return real_run(cmd, *a, **k)
+
+    monkeypatch.setattr(sp, "run", counting_run)
+    check = lambda: SumoRun(sc, RunOptions(progress=False), None)._check_loads()  # noqa: E731
+    check()
+    check()
+    assert len(children) == 1, "the second check is the marker's"
+    marker = runner.loads_ok_marker(sc, runner.sumo_binary())
+    assert marker is not None and marker.exists()
+    # An edited route file: checked again.
+    rou = sc.route_files[0]
+    rou.write_text(rou.read_text() + "\n<!-- edited -->\n")
+    check()
+    assert len(children) == 2
+    # A net that no longer loads: refused, and nothing noted.
+    sc.net_file.write_text("<net><edge id=")
+    with pytest.raises(sumo.ScenarioError, match="SUMO refused to start"):
+        check()
+    assert runner.loads_ok_marker(sc, runner.sumo_binary()) is not None
+    assert not runner.loads_ok_marker(sc, runner.sumo_binary()).exists()  # type: ignore[union-attr]
+
+
 def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -> None:
     sc = sumo.resolve_scenario("urban_grid")
     run = SumoRun(sc, RunOptions(end_s=150, progress=False), tmp_path)

@@ -124,6 +124,45 @@ def sumo_binary(gui: bool = False) -> str:
     return shutil.which(name) or name
 
 
+def _cache_dir() -> Path:
+    env = os.environ.get("BLENDTRACK_CACHE_DIR")
+    if env:
+        return Path(env)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "blendtrack"
+
+
+def loads_ok_marker(scenario: Scenario, binary: str) -> Path | None:
+    """Where the runner notes that SUMO loaded ``scenario`` without error: a
+    file named by a hash of the SUMO binary (path, size, modification time),
+    the .sumocfg and every file its ``<input>`` names (the network, routes,
+    additional files), under ``$BLENDTRACK_CACHE_DIR`` (default
+    ``~/.cache/blendtrack``). Any change to them is another name, so the
+    child check runs again. None when a file cannot be read (no caching)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        h = hashlib.sha256()
+        st = os.stat(binary)
+        h.update(f"{os.path.realpath(binary)}:{st.st_size}:{st.st_mtime_ns}\n".encode())
+        cfg = scenario.sumocfg
+        h.update(cfg.read_bytes())
+        files = {scenario.net_file, *scenario.route_files}
+        inputs = ET.parse(cfg).getroot().find("input")
+        for opt in inputs if inputs is not None else ():
+            for part in opt.get("value", "").replace(",", " ").split():
+                f = (cfg.parent / part).resolve()
+                if f.is_file():
+                    files.add(f)
+        for f in sorted(files):
+            h.update(f"\n{f}\n".encode())
+            with open(f, "rb") as fh:
+                for chunk in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(chunk)
+    except (OSError, ET.ParseError):
+        return None
+    return _cache_dir() / "sumo-loads-ok" / h.hexdigest()
+
+
 @dataclass
 class RunOptions:
     """What a run controls and how (see ``blendtrack sumo run --help``)."""
@@ -426,9 +465,17 @@ class SumoRun:
         self._lane_vehicles = lane_ids if callable(lane_ids) else self.sumo.lane.getLastStepVehicleIDs
 
     def _check_loads(self) -> None:
+        """Loads the scenario once in a child ``sumo`` (see ``start``). A
+        scenario that loaded before, byte for byte with the same SUMO binary,
+        is not loaded again (``loads_ok_marker``): the check costs a second
+        on the highway, once per run otherwise (batch sweeps, benchmarks)."""
         import subprocess
 
-        cmd = [sumo_binary(False), "-c", str(self.scenario.sumocfg), "--end", "0", "--no-step-log", "true",
+        binary = sumo_binary(False)
+        marker = loads_ok_marker(self.scenario, binary)
+        if marker is not None and marker.exists():
+            return
+        cmd = [binary, "-c", str(self.scenario.sumocfg), "--end", "0", "--no-step-log", "true",
                "--duration-log.disable", "true", "--no-warnings", "true"]
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
@@ -439,6 +486,14 @@ class SumoRun:
             crash = f"SUMO crashed while loading it (signal {-proc.returncode})" if proc.returncode < 0 else f"exit code {proc.returncode}"
             errors = [ln for ln in lines if "Error" in ln] or lines or [crash]
             raise ScenarioError(f"{self.scenario.sumocfg}: SUMO refused to start: {errors[0].strip()}")
+        if marker is not None:
+            try:
+                marker.parent.mkdir(parents=True, exist_ok=True)
+                tmp = marker.with_name(marker.name + f".{os.getpid()}.tmp")
+                tmp.write_text(str(self.scenario.sumocfg) + "\n")
+                os.replace(tmp, marker)
+            except OSError:
+                pass  # no cache: the check runs again next time
 
     def close(self) -> None:
         if self.sumo is not None:
