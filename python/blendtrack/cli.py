@@ -336,6 +336,16 @@ def _seeds(text: str) -> int:
     return value
 
 
+def _add_border_margin(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--border-margin",
+        type=_finite("border margin", 0.0),
+        default=0.0,
+        metavar="M",
+        help="widen the virtual borders by M metres on each side of the lane (>= 0; default 0: the lane's width)",
+    )
+
+
 def _add_compare_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None:
     cmp = subcommands.add_parser(
         "compare",
@@ -366,13 +376,7 @@ def _add_compare_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> N
     which.add_argument("--controlled-type", metavar="T", help="control every vehicle of vType T (default: vTypes with blendtrack.controlled=true)")
     cmp.add_argument("--alpha", type=_finite("alpha", 0.0, high=1.0), metavar="A", help="blend factor for every controlled vehicle")
     cmp.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
-    cmp.add_argument(
-        "--border-margin",
-        type=_finite("border margin", 0.0),
-        default=0.0,
-        metavar="M",
-        help="widen the virtual borders by M metres on each side of the lane (>= 0; default 0)",
-    )
+    _add_border_margin(cmp)
     cmp.add_argument("--seeds", type=_seeds, default=3, metavar="N", help="run seeds 0..N-1 (default 3)")
     cmp.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
     cmp.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -533,13 +537,7 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
     )
     run.add_argument("--alpha", type=_finite("alpha", 0.0, high=1.0), metavar="A", help="blend factor for every controlled vehicle (0 = rear axle, 1 = front axle)")
     run.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
-    run.add_argument(
-        "--border-margin",
-        type=_finite("border margin", 0.0),
-        default=0.0,
-        metavar="M",
-        help="widen the virtual borders by M metres on each side of the lane (>= 0; default 0: the lane's width)",
-    )
+    _add_border_margin(run)
     run.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
     run.add_argument("--seed", type=int, default=0, metavar="N", help="seed of SUMO and of the vehicle selection (default 0)")
     run.add_argument("--gui", action="store_true", help="show the run in sumo-gui (through TraCI)")

@@ -434,12 +434,7 @@ impl RouteFleet {
             lane: &ln,
             lane_pos_m: &lp,
         };
-        let inner = &mut self.inner;
-        let q = py.detach(|| inner.plan(&obs)).map_err(traffic_error)?;
-        Ok(q.into_iter()
-            .map(|i| i as i64)
-            .collect::<Vec<_>>()
-            .into_pyarray(py))
+        self.run_plan(py, &obs)
     }
 
     /// `plan` with the leaders as SUMO's `vehicle.getLeader` gives them: one
@@ -567,12 +562,7 @@ impl RouteFleet {
             lane: &ln,
             lane_pos_m: &lp,
         };
-        let inner = &mut self.inner;
-        let q = py.detach(|| inner.plan(&obs)).map_err(traffic_error)?;
-        Ok(q.into_iter()
-            .map(|i| i as i64)
-            .collect::<Vec<_>>()
-            .into_pyarray(py))
+        self.run_plan(py, &obs)
     }
 
     /// The lanes (the caller's ids) on which at least two of `slots` are where
@@ -732,6 +722,18 @@ impl RouteFleet {
             self.inner.fleet().n_tracks(),
             self.inner.len()
         )
+    }
+}
+
+impl RouteFleet {
+    /// The core's plan with the interpreter released; the query indices as an array.
+    fn run_plan<'py>(&mut self, py: Python<'py>, obs: &Observations<'_>) -> PyResult<Bound<'py, PyArray1<i64>>> {
+        let inner = &mut self.inner;
+        let q = py.detach(|| inner.plan(obs)).map_err(traffic_error)?;
+        Ok(q.into_iter()
+            .map(|i| i as i64)
+            .collect::<Vec<_>>()
+            .into_pyarray(py))
     }
 }
 

@@ -75,6 +75,9 @@ pub struct Projection {
 
 const CHUNK: usize = 32;
 
+/// The next or the previous segment (a walk's direction along a path).
+type Advance = fn(&Path, usize) -> Option<usize>;
+
 /// Widths of a track at one point (metres from the centreline along the normal).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Widths {
@@ -805,22 +808,9 @@ impl Path {
         let (k0, _) = self.locate(bound);
         let (d0, t0) = self.seg_dist2(k0, p);
         let mut best = (d0, k0, t0);
-        for advance in [Self::next_seg, Self::prev_seg] {
-            let mut k = k0;
-            let mut steps = 0;
-            while steps < n_seg {
-                let Some(nk) = advance(self, k) else { break };
-                let (d, t) = self.seg_dist2(nk, p);
-                if d >= best.0 {
-                    break;
-                }
-                best = (d, nk, t);
-                k = nk;
-                steps += 1;
-            }
-            if best.1 != k0 {
-                break; // it moved forward: no need to look back
-            }
+        // Forward first; only if that did not move, backward.
+        if self.descend(p, k0, Self::next_seg, &mut best, n_seg) == 0 {
+            self.descend(p, k0, Self::prev_seg, &mut best, n_seg);
         }
         best
     }
@@ -912,24 +902,42 @@ impl Path {
             }
         }
         // Walk on past the window edge while the distance keeps decreasing.
-        let step: Option<(usize, fn(&Self, usize) -> Option<usize>)> = if best.1 == last_fwd {
+        let step: Option<(usize, Advance)> = if best.1 == last_fwd {
             Some((last_fwd, Self::next_seg))
         } else if best.1 == last_bwd {
             Some((last_bwd, Self::prev_seg))
         } else {
             None
         };
-        if let Some((mut k, advance)) = step {
-            while scanned < n_seg {
-                let Some(nk) = advance(self, k) else { break };
-                scanned += 1;
-                if !consider(nk, &mut best) {
-                    break;
-                }
-                k = nk;
-            }
+        if let Some((k, advance)) = step {
+            self.descend(p, k, advance, &mut best, n_seg - scanned);
         }
         best
+    }
+
+    /// From segment `k`, on along `advance` while the next segment is nearer
+    /// to `p` than `best` (which it updates), at most `budget` segments.
+    /// Returns how many segments it moved.
+    fn descend(
+        &self,
+        p: &Point2<f64>,
+        mut k: usize,
+        advance: Advance,
+        best: &mut (f64, usize, f64),
+        budget: usize,
+    ) -> usize {
+        let mut moved = 0;
+        while moved < budget {
+            let Some(nk) = advance(self, k) else { break };
+            let (d2, t) = self.seg_dist2(nk, p);
+            if d2 >= best.0 {
+                break;
+            }
+            *best = (d2, nk, t);
+            k = nk;
+            moved += 1;
+        }
+        moved
     }
 
     /// Projects with a hint when one is given, with the full search otherwise.

@@ -1898,6 +1898,23 @@ mod tests {
         out
     }
 
+    /// One vehicle at `x` (rear axle) and `v` on `road(None, true)`, five
+    /// steps into a simulator that reports every step: its place is known.
+    fn settled_on_lane_10(x: f64, v: f64) -> (RouteFleet, i64, Sim) {
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f.add_vehicle(t, None, None, body(), at(x, v)).unwrap() as i64;
+        let mut sim = Sim {
+            lanes: vec![(10, 200.0)],
+            lane: 0,
+            pos: 0.0,
+            speed: 0.0,
+        };
+        for _ in 0..5 {
+            sim_step(&mut f, a, &mut sim, true);
+        }
+        (f, a, sim)
+    }
+
     /// Where the front must be on `lane`, from its arc length on `road(..)`.
     fn front_lane_pos(f: &RouteFleet, slot: i64) -> (u32, f64) {
         let sf = f.s_front(slot).unwrap();
@@ -1994,17 +2011,7 @@ mod tests {
 
     #[test]
     fn a_simulator_that_lags_the_prediction_gets_the_vehicle_placed_again() {
-        let (mut f, t) = fleet_on(road(None, true));
-        let a = f.add_vehicle(t, None, None, body(), at(40.0, 8.0)).unwrap() as i64;
-        let mut sim = Sim {
-            lanes: vec![(10, 200.0)],
-            lane: 0,
-            pos: 0.0,
-            speed: 0.0,
-        };
-        for _ in 0..5 {
-            sim_step(&mut f, a, &mut sim, true);
-        }
+        let (mut f, a, mut sim) = settled_on_lane_10(40.0, 8.0);
         // The simulator held the vehicle back 1 m (it could not move it).
         sim.pos -= 1.0;
         let out = sim_step(&mut f, a, &mut sim, true);
@@ -2020,17 +2027,7 @@ mod tests {
     #[test]
     fn a_simulator_a_little_off_is_brought_back_by_the_speed_never_moved_back() {
         for offset in [0.3, -0.3] {
-            let (mut f, t) = fleet_on(road(None, true));
-            let a = f.add_vehicle(t, None, None, body(), at(40.0, 8.0)).unwrap() as i64;
-            let mut sim = Sim {
-                lanes: vec![(10, 200.0)],
-                lane: 0,
-                pos: 0.0,
-                speed: 0.0,
-            };
-            for _ in 0..5 {
-                sim_step(&mut f, a, &mut sim, true);
-            }
+            let (mut f, a, mut sim) = settled_on_lane_10(40.0, 8.0);
             // The simulator has the front 0.3 m ahead of (or behind) blendtrack's.
             sim.pos += offset;
             let mut err = offset;
