@@ -4,12 +4,13 @@
 Runs one scenario with the same demand (SUMO's --scale multiplies it) as:
 plain SUMO through libsumo (every vehicle on SUMO's own models, nothing but
 simulationStep in the loop), then the plugin with 0, 10, 100 and 1000
-controlled vehicles (the first ones to depart). Each case runs in a fresh
-process (libsumo runs one simulation per process reliably), and the cases
-are interleaved over --reps repetitions (plain, 0, 10, ..., plain, 0, ...):
-the machines this runs on are shared and their speed drifts by tens of per
-cent within minutes, so each ratio is taken within one repetition (a case
-against the plain run just before it) and the medians are printed. Target:
+controlled vehicles (the first ones to depart), all with SUMO's same options
+and seed. Each case runs in a fresh process (libsumo runs one simulation per
+process reliably), right after a plain run of its own, over --reps
+repetitions (plain, 0, plain, 10, ..., plain, 0, ...): the machines this
+runs on are shared and their speed drifts by tens of per cent within
+minutes, so each ratio is of a case and the plain run just before it, and
+the medians are printed. Target:
 at 1000 controlled vehicles, at most 2x plain SUMO. A benchmark measures; it
 asserts nothing.
 
@@ -36,8 +37,10 @@ def plain(scenario_name: str, end: float, scale: float) -> dict[str, Any]:
     # Timed from SUMO's start, as the plugin's run is (which also checks the
     # scenario in a child SUMO and reads the network for the lane geometry).
     t0 = time.perf_counter()
-    libsumo.start([sumo_binary(), "-c", str(scenario.sumocfg), "--end", str(end), "--scale", str(scale),
-                   "--no-step-log", "true", "--no-warnings", "true"])
+    # The options the plugin gives SUMO (SumoRun._command): the same seed
+    # (another one is other traffic), no logs.
+    libsumo.start([sumo_binary(), "-c", str(scenario.sumocfg), "--seed", "0", "--end", str(end), "--scale", str(scale),
+                   "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"])
     n = 0
     while libsumo.simulation.getTime() < end - 1e-9 and libsumo.simulation.getMinExpectedNumber() > 0:
         libsumo.simulationStep()
@@ -96,18 +99,21 @@ def main() -> None:
     runs: dict[int, list[dict[str, Any]]] = {n: [] for n in counts}
     ratios: dict[int, list[float]] = {n: [] for n in counts}
     for rep in range(args.reps):
-        p = in_fresh_process(plain, sc.name, args.end, args.scale)
-        plains.append(p["wall"])
-        print(f"rep {rep + 1}/{args.reps}: plain {p['wall']:.2f} s", end="", flush=True)
+        print(f"rep {rep + 1}/{args.reps}:", end="", flush=True)
         for n in counts:
+            # A plain run right before each case: the ratio is of two runs a
+            # few seconds apart.
+            p = in_fresh_process(plain, sc.name, args.end, args.scale)
+            plains.append(p["wall"])
             r = in_fresh_process(plugin, sc.name, args.end, args.scale, n)
             runs[n].append(r)
             ratios[n].append(r["wall"] / p["wall"])
-            print(f", {n}: {r['wall']:.2f} s", end="", flush=True)
+            print(f" plain {p['wall']:.2f} s, {n}: {r['wall']:.2f} s;", end="", flush=True)
         print()
     base = statistics.median(plains)
     print(f"\nscenario {sc.name}, demand x{args.scale:g}, {args.end:g} s simulated, {p['steps']} steps, "
-          f"medians of {args.reps} interleaved repetitions")
+          f"medians of {args.reps} repetitions; x plain: the median of each run over the plain run just before it; "
+          f"ratio range {', '.join(f'{n}: {min(ratios[n]):.2f}-{max(ratios[n]):.2f}' for n in counts)}")
     print(f"{'controlled':>10} {'wall (s)':>9} {'x plain':>8} {'SUMO step (s)':>14} {'rest (s)':>9} {'us / veh / step':>16}")
     print(f"{'plain SUMO':>10} {base:9.2f} {1.0:8.2f} {base:14.2f} {'':>9} {'':>16}")
     for n in counts:
