@@ -408,6 +408,18 @@ def test_traci_backend_matches_libsumo(tmp_path: Path) -> None:
         assert abs(rb[vid].sum_abs_e - ra[vid].sum_abs_e) < 1e-6 * max(1.0, ra[vid].sum_abs_e)
 
 
+def test_run_scenario_takes_a_str_folder_and_refuses_none(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``out`` may be a str; a missing folder is a TypeError naming it, before SUMO starts."""
+    sc = sumo.resolve_scenario("ring_single_lane")
+    with pytest.raises(TypeError, match="out must be a folder path"):
+        sumo.run_scenario(sc, RunOptions(end_s=20, progress=False), None)  # type: ignore[arg-type]
+    monkeypatch.chdir(tmp_path)
+    result = sumo.run_scenario(sc, RunOptions(end_s=20, progress=False, backend="traci"), "out/ring")
+    assert (tmp_path / "out" / "ring" / "vehicles.csv").is_file()
+    assert (tmp_path / "out" / "ring" / "summary.json").is_file()
+    assert result.summary["controlled_vehicles"] >= 1
+
+
 def test_user_sumocfg_without_scenario_toml(tmp_path: Path) -> None:
     mine = tmp_path / "mine"
     shutil.copytree(SCENARIOS / "ring_single_lane", mine)

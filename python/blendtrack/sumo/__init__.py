@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import os
 import tomllib
 from pathlib import Path
 from typing import Any
@@ -39,9 +40,10 @@ def config_keys(file: str | Path) -> set[str]:
     return set(table) if isinstance(table, dict) else set()
 
 
-def run_scenario(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
+def run_scenario(scenario: Scenario, options: RunOptions, out: str | os.PathLike[str]) -> RunResult:
     """Runs ``scenario`` and writes ``out/vehicles.csv``, ``out/summary.json``,
-    the plots, the optional trace, and SUMO's outputs under ``out/sumo/``.
+    the plots, the optional trace, and SUMO's outputs under ``out/sumo/``
+    (``out``: a folder, a ``str`` or a path; created if missing).
 
     libsumo allows one simulation per process reliably (see ``SumoRun.start``):
     when this process has run one already, the run happens in a fresh child
@@ -53,6 +55,9 @@ def run_scenario(scenario: Scenario, options: RunOptions, out: Path) -> RunResul
     """
     from blendtrack.sumo import runner
 
+    if not isinstance(out, (str, os.PathLike)):
+        raise TypeError(f"run_scenario: out must be a folder path (str or os.PathLike), not {type(out).__name__}")
+    out = Path(out)
     uses_libsumo = options.backend == "libsumo" and not options.gui
     if uses_libsumo and runner._LIBSUMO_STARTED:
         return _run_in_child(scenario, options, out)
