@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import shutil
 import subprocess
 import sys
@@ -11,6 +12,7 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 
 import blendtrack
@@ -132,6 +134,53 @@ def test_grid_with_every_vehicle_controlled_has_no_junction_collision(tmp_path: 
     assert _collisions(tmp_path) == []
     assert result.summary["red_light_violations"] == 0
     assert sum(r.reason == "arrived" for r in result.records) > 100, "traffic flows (no deadlock)"
+
+
+def test_body_and_distance_to_a_path_in_closed_form() -> None:
+    """A 4.5 m x 1.8 m vehicle facing east (SUMO angle 90, clockwise from
+    north) with its front at (10, 0)."""
+    from blendtrack.sumo.runner import _body_points, _segments_distance
+
+    class Veh:
+        def getPosition(self, vid: str) -> tuple[float, float]:
+            return (10.0, 0.0)
+
+        def getAngle(self, vid: str) -> float:
+            return 90.0
+
+        def getLength(self, vid: str) -> float:
+            return 4.5
+
+        def getWidth(self, vid: str) -> float:
+            return 1.8
+
+    body, half = _body_points(Veh(), "x")
+    assert body == pytest.approx(np.array([[5.5, 0.0], [10.0, 0.0]]))
+    assert half == pytest.approx(0.9)
+    # A path crossing 3 m ahead of the front, from south to north.
+    assert _segments_distance(body, np.array([[13.0, -20.0], [13.0, 20.0]])) == pytest.approx(3.0)
+    # A path alongside, 2.9 m to the left of the centreline.
+    assert _segments_distance(body, np.array([[0.0, 2.9], [6.0, 2.9], [30.0, 2.9]])) == pytest.approx(2.9)
+    # A path through the body between its ends: they cross.
+    assert _segments_distance(body, np.array([[8.0, -5.0], [8.0, 5.0]])) == 0.0
+    # Behind the back, at an angle: the back point's distance to the segment.
+    assert _segments_distance(body, np.array([[0.0, -3.0], [6.0, 3.0]])) == pytest.approx(abs(5.5 - 0.0 - 3.0) / math.sqrt(2.0))
+    assert _segments_distance(body, np.zeros((0, 2))) == math.inf
+
+
+def test_grid_waits_for_a_vehicle_standing_inside_the_junction(tmp_path: Path) -> None:
+    """A left turner waiting at its internal stop point reaches into the
+    lanes beside and across it; vehicles with a green light used to drive
+    into it (this seed: at 303.9 s a follower going straight at C3 hit a
+    controlled left turner standing on the diverging junction lane, and
+    two more hit it later). They now wait at the line while a vehicle
+    inside the junction is within their path's half width."""
+    sc = sumo.resolve_scenario("urban_grid")
+    result = sumo.run_scenario(sc, RunOptions(end_s=420, seed=2, alpha=0.8, progress=False), tmp_path)
+    assert result.summary["inside_junction_waits"] > 0, "the check fired"
+    assert _collisions(tmp_path) == []
+    assert result.summary["red_light_violations"] == 0
+    assert sum(r.reason == "arrived" for r in result.records) > 50, "traffic flows"
 
 
 def test_obstacle_is_assumed_to_brake_like_the_vehicle_unless_set(tmp_path: Path) -> None:

@@ -239,6 +239,7 @@ class RouteFleet:
         stop_major: _ArrayLike | None = None,
         stop_via: _ArrayLike | None = None,
         stop_exit_m: _ArrayLike | None = None,
+        stop_check_inside: _ArrayLike | None = None,
         lane_change: tuple[int, int] | None = None,
     ) -> int: ...
     def add_vehicle(

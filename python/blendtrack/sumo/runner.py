@@ -85,6 +85,18 @@ ROUTE_CHECK_EVERY = 10
 # a vehicle waits while a foe is this many seconds or metres from its stop line.
 INTERNAL_YIELD_S = 4.0
 INTERNAL_YIELD_NEAR_M = 5.0
+#: Where a vehicle stops short of a waiting point it must stop at (m).
+STOP_MARGIN_M = 1.0
+#: Share of the planning deceleration a turner should need to stop at its
+#: internal waiting point once past the entry line.
+ENTRY_SLOW_DECEL = 0.5
+#: A vehicle inside a junction is in the way of one about to enter when its
+#: body comes within this much of the half width of the entering vehicle's
+#: path through the junction (m).
+INSIDE_MARGIN_M = 0.3
+#: Junction lanes further than this from a path (m) never carry a vehicle in
+#: its way: the widest body half width plus the margin, with room to spare.
+INSIDE_LANE_REACH_M = 4.0
 # True once this process has started a libsumo simulation (see SumoRun.start).
 _LIBSUMO_STARTED = False
 
@@ -289,6 +301,8 @@ class SumoRun:
         self.base_vehicle = options.vehicle or VehicleParams()
         if options.alpha is not None:
             self.base_config = self.base_config.replace(lat_blend_factor=options.alpha)
+        #: The deceleration (m/s^2, > 0) a vehicle plans to stop with.
+        self._plan_decel = max(abs(float(self.base_config.max_deceleration)), 0.5)
         self.fleet = RouteFleet(
             standstill_margin_m=options.standstill_margin_m,
             yield_lookahead_m=YIELD_LOOKAHEAD_M,
@@ -314,6 +328,13 @@ class SumoRun:
         #: Junction lanes that start at an internal junction (see geometry's stops).
         self._internal_vias: set[str] = set()
         self._conn_of_via: dict[str, Any] | None = None
+        #: Per junction entry lane: (its path through the junction, the other
+        #: junction lanes that come near it); see ``_junction_lanes``.
+        self._inside: dict[str, tuple[np.ndarray, tuple[str, ...]]] = {}
+        #: Per junction entry lane: its internal waiting point and the distance to it.
+        self._waiting_points: dict[str, tuple[str | None, float]] = {}
+        #: Lanes' vehicle lists read this step (several vehicles ask about one junction).
+        self._lane_ids_step: tuple[int, dict[str, Any]] = (-1, {})
         self._trace_rows: list[tuple[Any, ...]] = []
         #: Vehicles whose SUMO lane position is read next step (unknown to
         #: blendtrack, or due for a check of its prediction).
@@ -333,7 +354,7 @@ class SumoRun:
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0, "inside_junction_waits": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         #: Moves by kind (see RouteFleet): speed only, nothing to send,
         #: (lane, position), (x, y, angle).
@@ -617,6 +638,7 @@ class SumoRun:
                 stop_major=[int(st[3]) for st in stops],
                 stop_via=[lanes.id(st[4]) for st in stops],
                 stop_exit_m=[st[5] for st in stops],
+                stop_check_inside=[int(bool(self._junction_lanes(st[4])[1])) for st in stops],
                 lane_change=(
                     (edge_ids.id(geo.edges[geo.pending_change[0]]), geo.pending_change[1])
                     if geo.pending_change is not None
@@ -739,6 +761,7 @@ class SumoRun:
             "moves_xy": self.moves["xy"],
             "reroutes": self.counts["reroutes"],
             "lane_changes_aborted": self.counts["lane_changes_aborted"],
+            "inside_junction_waits": self.counts["inside_junction_waits"],
         }
         samples = self.fleet.take_samples()
         return RunResult(self.records, summary, self._trajectories, samples)
@@ -1121,12 +1144,123 @@ class SumoRun:
             return False
         via = self._lanes.name(stop[4])
         if via in self._internal_vias:
-            return self._internal_junction_busy(vid, via)
-        for link in self.sumo.vehicle.getNextLinks(vid):
-            # (lane, has priority, is open, has foe, via lane, state, direction, length)
-            if link[4] == via:
-                return (not link[1]) and bool(link[3])
+            if self._internal_junction_busy(vid, via):
+                return True
+        else:
+            for link in self.sumo.vehicle.getNextLinks(vid):
+                # (lane, has priority, is open, has foe, via lane, state, direction, length)
+                if link[4] == via:
+                    if (not link[1]) and bool(link[3]):
+                        return True
+                    break
+            inner, offset = self._waiting_point_after(via)
+            if inner is not None:
+                # A turn with an internal waiting point a few metres into the
+                # junction: too fast to stop there, the vehicle would cross
+                # the oncoming lanes without looking (the point is asked
+                # about only once the entry is passed). While it could not
+                # stop there gently (ENTRY_SLOW_DECEL of the planning
+                # deceleration) and the point would make it wait, it is held
+                # at the entry line, so it slows; once slow it goes on to
+                # wait at the point, as SUMO's drivers do.
+                v = max(float(self.sumo.vehicle.getSpeed(vid)), 0.0)
+                room = stop[0] - self.fleet.s_front(slot) + offset - STOP_MARGIN_M
+                gentle = ENTRY_SLOW_DECEL * self._plan_decel
+                if v * v > 2.0 * gentle * room and self._internal_junction_busy(vid, inner):
+                    return True
+        return self._junction_blocked(vid, via)
+
+    def _waiting_point_after(self, via: str) -> tuple[str | None, float]:
+        """The internal waiting point on the junction path that starts with
+        ``via`` (its junction lane, and its distance from the entry line along
+        the lanes), or (None, 0)."""
+        hit = self._waiting_points.get(via)
+        if hit is None:
+            hit = (None, 0.0)
+            c = self._connection_of(via)
+            if c is not None:
+                offset = 0.0
+                for part in _via_chain(self._net_geometry(), c):
+                    if part.getID() != via and part.getID() in self._internal_vias:
+                        hit = (part.getID(), offset)
+                        break
+                    offset += float(part.getLength())
+            self._waiting_points[via] = hit
+        return hit
+
+    def _junction_blocked(self, vid: str, via: str) -> bool:
+        """Is a vehicle inside the junction in the way of ``vid``, about to
+        enter it through ``via``: its body (SUMO's front point, angle, length
+        and width) within the half width of ``vid``'s path through the
+        junction plus ``INSIDE_MARGIN_M``? A left turner waiting at its
+        internal stop point can reach into a crossing lane, and a follower's
+        lane can diverge from it barely apart; ``getLeader`` reports neither
+        (they are on other junction lanes), SUMO's drivers see them through
+        the junction's foe lanes, so blendtrack checks the geometry itself.
+        Asked only near a junction whose lanes come near this one."""
+        path, lanes = self._junction_lanes(via)
+        if not lanes:
+            return False
+        veh = self.sumo.vehicle
+        step, listed = self._lane_ids_step
+        if step != self._steps:
+            listed = {}
+            self._lane_ids_step = (self._steps, listed)
+        reach = 0.5 * float(veh.getWidth(vid)) + INSIDE_MARGIN_M
+        for lane in lanes:
+            ids = listed.get(lane)
+            if ids is None:
+                ids = listed[lane] = self._lane_vehicles(lane)
+            for other in ids:
+                if other == vid:
+                    continue
+                body, half = _body_points(veh, other)
+                if _segments_distance(body, path) < reach + half:
+                    self.counts["inside_junction_waits"] += 1
+                    return True
         return False
+
+    def _connection_of(self, via: str) -> Any:
+        """The network connection whose junction lanes include ``via`` (None if none)."""
+        if self._conn_of_via is None:
+            net = self._net_geometry()
+            self._conn_of_via = {}
+            for edge in net.getEdges():
+                for ln in edge.getLanes():
+                    for c in ln.getOutgoing():
+                        for part in _via_chain(net, c):
+                            self._conn_of_via[part.getID()] = c
+        return self._conn_of_via.get(via)
+
+    def _junction_lanes(self, via: str) -> tuple[np.ndarray, tuple[str, ...]]:
+        """The path (points) through the junction from the junction lane
+        ``via`` on, and the junction's other lanes that come within
+        ``INSIDE_LANE_REACH_M`` of it (none: nothing to check)."""
+        hit = self._inside.get(via)
+        if hit is None:
+            net = self._net_geometry()
+            c = self._connection_of(via)
+            path = np.zeros((0, 2))
+            near: list[str] = []
+            if c is not None:
+                chain = [part.getID() for part in _via_chain(net, c)]
+                own = chain[chain.index(via):] if via in chain else chain
+                if own:
+                    path = np.concatenate([np.asarray(net.getLane(x).getShape(), dtype=float)[:, :2] for x in own])
+                    node = c.getFrom().getToNode()
+                    seen = set(chain)
+                    for other in node.getConnections():
+                        for part in _via_chain(net, other):
+                            lid = part.getID()
+                            if lid in seen:
+                                continue
+                            seen.add(lid)
+                            pts = np.asarray(part.getShape(), dtype=float)[:, :2]
+                            if _segments_distance(pts, path) < INSIDE_LANE_REACH_M:
+                                near.append(lid)
+            hit = (path, tuple(near))
+            self._inside[via] = hit
+        return hit
 
     def _internal_junction_busy(self, vid: str, via: str) -> bool:
         """At the waiting point of a turn across oncoming lanes: is a foe
@@ -1165,15 +1299,8 @@ class SumoRun:
         hit = self._foes.get(via)
         if hit is None:
             net = self._net_geometry()
-            if self._conn_of_via is None:
-                self._conn_of_via = {}
-                for edge in net.getEdges():
-                    for ln in edge.getLanes():
-                        for c in ln.getOutgoing():
-                            for part in _via_chain(net, c):
-                                self._conn_of_via[part.getID()] = c
             hit = []
-            c = self._conn_of_via.get(via)
+            c = self._connection_of(via)
             if c is not None:
                 node = c.getFrom().getToNode()
                 i = node.getLinkIndex(c)
@@ -1253,6 +1380,47 @@ def _parse_like(raw: str, current: Any) -> Any:
     if isinstance(current, float):
         return float(raw)
     return raw.strip()
+
+
+def _body_points(veh: Any, vid: str) -> tuple[np.ndarray, float]:
+    """A vehicle's body as SUMO has it: its centreline from the back to the
+    front point (2 x 2) and its half width (from SUMO's front point, angle,
+    length and width)."""
+    x, y = veh.getPosition(vid)
+    a = math.radians(float(veh.getAngle(vid)))
+    length = float(veh.getLength(vid))
+    ux, uy = math.sin(a), math.cos(a)  # SUMO's angle: clockwise from north
+    return np.array([[x - length * ux, y - length * uy], [x, y]]), 0.5 * float(veh.getWidth(vid))
+
+
+def _segments_distance(p: np.ndarray, q: np.ndarray) -> float:
+    """Smallest distance between the polylines ``p`` and ``q`` (n x 2 each):
+    zero where two segments cross, else the smallest of the end point to
+    segment distances."""
+    if len(p) == 0 or len(q) == 0:
+        return math.inf
+    if len(p) == 1:
+        p = np.vstack([p, p])
+    if len(q) == 1:
+        q = np.vstack([q, q])
+    a, b = p[:-1][:, None, :], p[1:][:, None, :]
+    c, d = q[:-1][None, :, :], q[1:][None, :, :]
+
+    def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+    d1, d2 = cross(b - a, c - a), cross(b - a, d - a)
+    d3, d4 = cross(d - c, a - c), cross(d - c, b - c)
+    if np.any((d1 * d2 < 0) & (d3 * d4 < 0)):
+        return 0.0
+
+    def point_seg(pt: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
+        e = s1 - s0
+        den = np.maximum(np.sum(e * e, axis=-1), 1e-12)
+        t = np.clip(np.sum((pt - s0) * e, axis=-1) / den, 0.0, 1.0)
+        return np.hypot(*np.moveaxis(s0 + t[..., None] * e - pt, -1, 0))
+
+    return float(min(point_seg(a, c, d).min(), point_seg(b, c, d).min(), point_seg(c, a, b).min(), point_seg(d, a, b).min()))
 
 
 def _could_change_lane(lane_change_state: Callable[[str, int], Any], vid: str, direction: int) -> bool:

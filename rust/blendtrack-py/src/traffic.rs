@@ -163,7 +163,7 @@ impl RouteFleet {
     }
 
     /// Registers a track with its lane pieces and stop lines; returns its id.
-    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_offset_m, piece_lane_length_m, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, piece_lane_pos_m = None, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, lane_change = None))]
+    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_offset_m, piece_lane_length_m, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, piece_lane_pos_m = None, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, stop_check_inside = None, lane_change = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_route(
         &mut self,
@@ -186,6 +186,7 @@ impl RouteFleet {
         stop_major: Option<I64In<'_>>,
         stop_via: Option<I64In<'_>>,
         stop_exit_m: Option<F64In<'_>>,
+        stop_check_inside: Option<I64In<'_>>,
         lane_change: Option<(i64, i64)>,
     ) -> PyResult<usize> {
         let starts = vec_of(&piece_start_m);
@@ -236,6 +237,7 @@ impl RouteFleet {
         let link = col_i(&stop_link, 0);
         let major = col_i(&stop_major, 0);
         let via = col_i(&stop_via, 0);
+        let check_inside = col_i(&stop_check_inside, 0);
         let exit = stop_exit_m
             .as_ref()
             .map(vec_of)
@@ -246,6 +248,7 @@ impl RouteFleet {
             ("stop_major", major.len()),
             ("stop_via", via.len()),
             ("stop_exit_m", exit.len()),
+            ("stop_check_inside", check_inside.len()),
         ] {
             same_len(name, m, got)?;
         }
@@ -262,6 +265,7 @@ impl RouteFleet {
                 major: major[i] != 0,
                 via: u32_of("stop_via", i, via[i])?,
                 exit_m: exit[i],
+                check_inside: check_inside[i] != 0,
             });
         }
         let lane_change = match lane_change {

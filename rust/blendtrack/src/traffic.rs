@@ -157,6 +157,11 @@ pub struct StopLine {
     pub via: u32,
     /// Arc length where the junction is left (m; +inf when unknown).
     pub exit_m: f64,
+    /// Ask the caller before entering even with the right of way: the
+    /// junction has other vehicles' lanes crossing or touching this one, and
+    /// a vehicle standing inside it (a left turner at its waiting point, a
+    /// vehicle left over from a jam) may be in the way.
+    pub check_inside: bool,
 }
 
 /// A lane change the route needs on one edge, made when the simulator says
@@ -985,9 +990,14 @@ impl RouteFleet {
                             // leader on the far side, so wait at the line.
                             stop_gap = gap;
                             holding = Some(next);
-                        } else if sig == Signal::Yield && near && (held || can_stop(cfg, v, gap)) {
-                            // Give way while the simulator reports foes;
-                            // too late to stop, clear the junction instead.
+                        } else if (sig == Signal::Yield || stop.check_inside)
+                            && near
+                            && (held || can_stop(cfg, v, gap))
+                        {
+                            // Give way while the simulator reports foes (or,
+                            // with the right of way, while the caller sees a
+                            // vehicle inside the junction in the way); too
+                            // late to stop, clear the junction instead.
                             plan.yield_gap[i] = gap;
                             plan.queries.push(i);
                         } else {
@@ -1341,6 +1351,7 @@ mod tests {
                 major,
                 via: 11,
                 exit_m: 210.0,
+                check_inside: false,
             }],
             600.0,
             None,
@@ -1499,6 +1510,40 @@ mod tests {
             step(&mut f, &[slot], false);
         }
         assert!(f.s_front(slot).unwrap() > 210.0);
+    }
+
+    #[test]
+    fn a_junction_checked_for_vehicles_inside_asks_even_with_the_right_of_way() {
+        // A major road and a green light: without the check neither asks
+        // (see links_without_priority_ask_and_wait_only_when_told_to); with
+        // it the vehicle asks near the line and waits only when told to.
+        for signal in [None, Some((0, 0))] {
+            for blocked in [true, false] {
+                let (path, mut route) = road(signal, true);
+                route.stops[0].check_inside = true;
+                let (mut f, t) = fleet_on((path, route));
+                if signal.is_some() {
+                    f.set_signal(0, &[Signal::Priority]).unwrap();
+                }
+                let slot = f
+                    .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+                    .unwrap() as i64;
+                let mut asked = 0;
+                for _ in 0..300 {
+                    asked += step(&mut f, &[slot], blocked).0.len();
+                }
+                assert!(asked > 0, "{signal:?}: asks within the look-ahead");
+                let sf = f.s_front(slot).unwrap();
+                if blocked {
+                    assert!(
+                        sf < 200.0 && f.state(slot).unwrap().v_mps.abs() < 0.05,
+                        "{signal:?}: waits at the line, front {sf}"
+                    );
+                } else {
+                    assert!(sf > 300.0, "{signal:?}: clear, drives through: front {sf}");
+                }
+            }
+        }
     }
 
     #[test]
