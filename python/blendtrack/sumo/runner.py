@@ -95,8 +95,11 @@ ENTRY_SLOW_DECEL = 0.5
 #: path through the junction (m).
 INSIDE_MARGIN_M = 0.3
 #: Junction lanes further than this from a path (m) never carry a vehicle in
-#: its way: the widest body half width plus the margin, with room to spare.
-INSIDE_LANE_REACH_M = 4.0
+#: its way: a wide body's half width (1.25 m) plus a car's reach (0.9 m +
+#: INSIDE_MARGIN_M) plus 0.5 m. Parallel lanes (3.2 m and more apart) are
+#: not checked, so a junction that only joins lane after lane (a highway's
+#: edges) asks nothing.
+INSIDE_LANE_REACH_M = 3.0
 # True once this process has started a libsumo simulation (see SumoRun.start).
 _LIBSUMO_STARTED = False
 
