@@ -205,23 +205,28 @@ impl Route {
                     p.start_m
                 ));
             }
-            if !(p.scale.is_finite() && p.scale > 0.0) {
-                return bad(format!(
-                    "piece {i} has lane scale {}: must be finite and > 0",
-                    p.scale
-                ));
-            }
-            if !(p.lane_pos_start_m.is_finite() && p.lane_pos_start_m >= 0.0) {
-                return bad(format!(
-                    "piece {i} starts at lane position {} m: must be finite and >= 0",
-                    p.lane_pos_start_m
-                ));
-            }
-            if !(p.lane_length_m.is_finite() && p.lane_length_m > 0.0) {
-                return bad(format!(
-                    "piece {i} has lane length {} m: must be finite and > 0",
-                    p.lane_length_m
-                ));
+            // (what, value, unit, allowed, rule)
+            let checks = [
+                ("has lane scale", p.scale, "", p.scale > 0.0, "finite and > 0"),
+                (
+                    "starts at lane position",
+                    p.lane_pos_start_m,
+                    " m",
+                    p.lane_pos_start_m >= 0.0,
+                    "finite and >= 0",
+                ),
+                (
+                    "has lane length",
+                    p.lane_length_m,
+                    " m",
+                    p.lane_length_m > 0.0,
+                    "finite and > 0",
+                ),
+            ];
+            for (what, value, unit, ok, rule) in checks {
+                if !(value.is_finite() && ok) {
+                    return bad(format!("piece {i} {what} {value}{unit}: must be {rule}"));
+                }
             }
             if p.offset_m.is_nan() || p.offset_m < 0.0 {
                 return bad(format!(
@@ -1903,6 +1908,16 @@ mod tests {
     }
 
     impl Sim {
+        /// The simulator's view of the road's first lane (10, 200 m), nothing known yet.
+        fn on_lane_10() -> Sim {
+            Sim {
+                lanes: vec![(10, 200.0)],
+                lane: 0,
+                pos: 0.0,
+                speed: 0.0,
+            }
+        }
+
         fn apply(&mut self, out: &RouteOutputs, i: usize) {
             match out.moves[i] {
                 Move::Hold => {}
@@ -1948,12 +1963,7 @@ mod tests {
     fn settled_on_lane_10(x: f64, v: f64) -> (RouteFleet, i64, Sim) {
         let (mut f, t) = fleet_on(road(None, true));
         let a = f.add_vehicle(t, None, None, body(), at(x, v)).unwrap() as i64;
-        let mut sim = Sim {
-            lanes: vec![(10, 200.0)],
-            lane: 0,
-            pos: 0.0,
-            speed: 0.0,
-        };
+        let mut sim = Sim::on_lane_10();
         for _ in 0..5 {
             sim_step(&mut f, a, &mut sim, true);
         }
@@ -1972,12 +1982,7 @@ mod tests {
     fn on_its_lane_a_vehicle_is_moved_by_its_speed_alone() {
         let (mut f, t) = fleet_on(road(None, true));
         let a = f.add_vehicle(t, None, None, body(), at(20.0, 14.5)).unwrap() as i64;
-        let mut sim = Sim {
-            lanes: vec![(10, 200.0)],
-            lane: 0,
-            pos: 0.0,
-            speed: 0.0,
-        };
+        let mut sim = Sim::on_lane_10();
         let mut read = true;
         let mut counts = [0usize; 5];
         for k in 0..500 {
@@ -2106,12 +2111,7 @@ mod tests {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         f.set_signal(0, &[Signal::Stop]).unwrap();
         let a = f.add_vehicle(t, None, None, body(), at(150.0, 10.0)).unwrap() as i64;
-        let mut sim = Sim {
-            lanes: vec![(10, 200.0)],
-            lane: 0,
-            pos: 0.0,
-            speed: 0.0,
-        };
+        let mut sim = Sim::on_lane_10();
         let mut read = true;
         for _ in 0..3000 {
             read = sim_step(&mut f, a, &mut sim, read).read_position[0];
