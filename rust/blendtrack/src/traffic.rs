@@ -1065,7 +1065,7 @@ impl RouteFleet {
             }
         }
         let n = plan.slots.len();
-        let mut cols: [Vec<f64>; 5] = Default::default();
+        let mut cols: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
         for &slot in &plan.slots {
             let s = self.driven[slot as usize]
                 .as_ref()
