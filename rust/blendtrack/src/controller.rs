@@ -251,10 +251,15 @@ impl Controller {
         let horizon = self.cfg.ray_horizon_m.min(
             relevance_distance(speed, &self.cfg) + 2.0 * track.corridor.max_width() + 5.0,
         );
+        // Forward, the ray runs along the heading: its (cos, sin) is `h`.
+        let u = match dir {
+            crate::vehicle::Direction::Forward => h,
+            crate::vehicle::Direction::Backward => Vector2::new(th_travel.cos(), th_travel.sin()),
+        };
         let d_obs = self
             .track
             .corridor
-            .ray_cast(path, &rear_pt, th_travel, rear.s, horizon);
+            .ray_cast_along(path, &rear_pt, &u, rear.s, horizon);
         let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
         Ok(ControlOutput {
             steering_rad: steering,

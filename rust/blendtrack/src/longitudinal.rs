@@ -457,6 +457,19 @@ impl Corridor {
         horizon_m: f64,
     ) -> Option<f64> {
         let u = Vector2::new(heading_rad.cos(), heading_rad.sin());
+        self.ray_cast_along(path, origin, &u, s_origin, horizon_m)
+    }
+
+    /// [`Self::ray_cast`] along the unit vector `u` (`(cos, sin)` of the
+    /// heading), for a caller that has it already.
+    pub fn ray_cast_along(
+        &self,
+        path: &Path,
+        origin: &Point2<f64>,
+        u: &Vector2<f64>,
+        s_origin: f64,
+        horizon_m: f64,
+    ) -> Option<f64> {
         let back = self.max_width_m + 1.0;
         let start_s = if path.is_closed() {
             path.wrap_s(s_origin - back)
@@ -467,10 +480,10 @@ impl Corridor {
         let slack = back + 2.0 * self.max_width_m + 5.0;
         let best = self
             .left_simple
-            .first_exit(&u, origin, start_s, scan, slack)
+            .first_exit(u, origin, start_s, scan, slack)
             .min(
                 self.right_simple
-                    .first_exit(&u, origin, start_s, scan, slack),
+                    .first_exit(u, origin, start_s, scan, slack),
             );
         if best.is_finite() {
             Some(best)
