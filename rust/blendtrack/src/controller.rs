@@ -73,6 +73,9 @@ pub struct Controller {
     hint_rear: Option<f64>,
     hint_front: Option<f64>,
     hint_cp: Option<f64>,
+    /// The segments of the last step's foot points (rear, front, control
+    /// point): where the look-up of each hint starts (`usize::MAX`: none).
+    hint_segments: [usize; 3],
     /// The rear axle and heading of the last step: the hints are moved on by
     /// the distance travelled along that heading since, so each projection
     /// starts next to its foot point.
@@ -107,6 +110,7 @@ impl Controller {
             hint_rear: None,
             hint_front: None,
             hint_cp: None,
+            hint_segments: [usize::MAX; 3],
             last_rear: None,
         })
     }
@@ -123,6 +127,7 @@ impl Controller {
         self.hint_rear = None;
         self.hint_front = None;
         self.hint_cp = None;
+        self.hint_segments = [usize::MAX; 3];
         self.last_rear = None;
     }
 
@@ -190,14 +195,15 @@ impl Controller {
             .map_or(0.0, |(p, h_last)| (rear_pt - p).dot(&h_last));
         self.last_rear = Some((rear_pt, h));
         let near = |hint: Option<f64>| hint.map_or(f64::NAN, |s| s + moved);
-        let rear = path.project_near(&rear_pt, near(self.hint_rear));
+        let [seg_rear, seg_front, seg_cp] = self.hint_segments;
+        let rear = path.project_near_from(&rear_pt, near(self.hint_rear), seg_rear);
         self.hint_rear = Some(rear.s);
         // Every controller projects the front axle: its error is reported.
         // Its curvature is only used (by the reverse Stanley feed-forward)
         // when driving backwards.
-        let mut front = path.project_near(&front_pt, near(self.hint_front));
+        let mut front = path.project_near_from(&front_pt, near(self.hint_front), seg_front);
         if dir == crate::vehicle::Direction::Backward {
-            front.curvature_per_m = path.curvature_at(front.s);
+            front.curvature_per_m = path.curvature_at_from(front.s, front.segment);
         }
         self.hint_front = Some(front.s);
         let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
@@ -231,19 +237,29 @@ impl Controller {
         let steering = raw.clamp(-self.max_steering_rad, self.max_steering_rad);
 
         let cp_pt = rear_pt + h * (alpha * e);
-        let mut cp = path.project_near(&cp_pt, self.hint_cp.map_or(rear.s + alpha * e, |s| s + moved));
-        cp.curvature_per_m = path.curvature_at(cp.s);
+        let (cp_hint, cp_seg) = match self.hint_cp {
+            Some(s) => (s + moved, seg_cp),
+            None => (rear.s + alpha * e, rear.segment),
+        };
+        let mut cp = path.project_near_from(&cp_pt, cp_hint, cp_seg);
+        cp.curvature_per_m = path.curvature_at_from(cp.s, cp.segment);
         self.hint_cp = Some(cp.s);
+        self.hint_segments = [rear.segment, front.segment, cp.segment];
         let th_travel = travel_heading(measured.theta_rad, dir);
 
         // Crossings beyond the relevance distance cannot change the command.
         let horizon = self.cfg.ray_horizon_m.min(
             relevance_distance(speed, &self.cfg) + 2.0 * track.corridor.max_width() + 5.0,
         );
+        // Forward, the ray runs along the heading: its (cos, sin) is `h`.
+        let u = match dir {
+            crate::vehicle::Direction::Forward => h,
+            crate::vehicle::Direction::Backward => Vector2::new(th_travel.cos(), th_travel.sin()),
+        };
         let d_obs = self
             .track
             .corridor
-            .ray_cast(path, &rear_pt, th_travel, rear.s, horizon);
+            .ray_cast_along(path, &rear_pt, &u, rear.s, horizon);
         let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
         Ok(ControlOutput {
             steering_rad: steering,

@@ -161,6 +161,11 @@ struct Border {
     /// Bounding box of each run of `BOX_SEGMENTS` segments, so a ray cast can
     /// skip a run its ray misses with one slab test.
     boxes: Vec<(Point2<f64>, Point2<f64>)>,
+    /// Per segment: its vector (end minus start) and the path arc length at
+    /// its end (`path_length` for a closed border's closing segment), so the
+    /// scan needs no index wrap-around.
+    edges: Vec<Vector2<f64>>,
+    end_s: Vec<f64>,
 }
 
 /// Segments per bounding box of a border.
@@ -273,9 +278,16 @@ impl Border {
                 (lo, hi)
             })
             .collect();
+        let s: Vec<f64> = idx.iter().map(|&i| vertex_s[i]).collect();
+        let edges = (0..n_seg).map(|k| pts[(k + 1) % n] - pts[k]).collect();
+        let end_s = (0..n_seg)
+            .map(|k| if k + 1 < n { s[k + 1] } else { path_length })
+            .collect();
         Border {
             pts,
-            s: idx.iter().map(|&i| vertex_s[i]).collect(),
+            s,
+            edges,
+            end_s,
             closed,
             path_length,
             leaving_sign,
@@ -294,9 +306,7 @@ impl Border {
     /// Ray parameter at which the ray leaves the corridor through segment `k`.
     #[inline]
     fn exit(&self, k: usize, u: &Vector2<f64>, o: &Point2<f64>) -> Option<f64> {
-        let a = &self.pts[k];
-        let b = &self.pts[(k + 1) % self.pts.len()];
-        segment_exit(a, b, u, o, self.leaving_sign)
+        segment_exit(&self.pts[k], &self.edges[k], u, o, self.leaving_sign)
     }
 
     /// Smallest exit parameter over the segments from path arc length
@@ -336,12 +346,7 @@ impl Border {
                 best = best.min(t);
             }
             // Arc length (along the path) scanned once this segment is done.
-            let end_s = if k + 1 < self.pts.len() {
-                self.s[k + 1]
-            } else {
-                self.path_length
-            };
-            let mut scanned = end_s - start_s;
+            let mut scanned = self.end_s[k] - start_s;
             if self.closed && scanned < 0.0 {
                 scanned += self.path_length;
             }
@@ -361,23 +366,22 @@ impl Border {
 }
 
 /// Ray parameter at which the ray `o + t u` leaves the corridor through the
-/// border segment `a -> b` (`leaving_sign` +1 for a left border, -1 for a right one).
+/// border segment from `a` along `e` (`leaving_sign` +1 for a left border, -1 for a right one).
 #[inline]
 fn segment_exit(
     a: &Point2<f64>,
-    b: &Point2<f64>,
+    e: &Vector2<f64>,
     u: &Vector2<f64>,
     o: &Point2<f64>,
     leaving_sign: f64,
 ) -> Option<f64> {
-    let e = b - a;
-    let denom = cross(u, &e);
+    let denom = cross(u, e);
     // Leaving a left border: the ray crosses it from its right to its left.
     if denom.abs() < 1e-15 || -denom * leaving_sign <= 0.0 {
         return None;
     }
     let ao = a - o;
-    let t = cross(&ao, &e) / denom;
+    let t = cross(&ao, e) / denom;
     let lam = cross(&ao, u) / denom;
     if t >= 0.0 && (0.0..=1.0).contains(&lam) {
         Some(t)
@@ -457,6 +461,19 @@ impl Corridor {
         horizon_m: f64,
     ) -> Option<f64> {
         let u = Vector2::new(heading_rad.cos(), heading_rad.sin());
+        self.ray_cast_along(path, origin, &u, s_origin, horizon_m)
+    }
+
+    /// [`Self::ray_cast`] along the unit vector `u` (`(cos, sin)` of the
+    /// heading), for a caller that has it already.
+    pub fn ray_cast_along(
+        &self,
+        path: &Path,
+        origin: &Point2<f64>,
+        u: &Vector2<f64>,
+        s_origin: f64,
+        horizon_m: f64,
+    ) -> Option<f64> {
         let back = self.max_width_m + 1.0;
         let start_s = if path.is_closed() {
             path.wrap_s(s_origin - back)
@@ -467,10 +484,10 @@ impl Corridor {
         let slack = back + 2.0 * self.max_width_m + 5.0;
         let best = self
             .left_simple
-            .first_exit(&u, origin, start_s, scan, slack)
+            .first_exit(u, origin, start_s, scan, slack)
             .min(
                 self.right_simple
-                    .first_exit(&u, origin, start_s, scan, slack),
+                    .first_exit(u, origin, start_s, scan, slack),
             );
         if best.is_finite() {
             Some(best)

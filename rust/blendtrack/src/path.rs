@@ -74,6 +74,8 @@ pub struct Projection {
 }
 
 const CHUNK: usize = 32;
+/// Steps [`Path::locate_from`] walks from its guess before it looks up.
+const LOCATE_STEPS: usize = 4;
 
 /// The next or the previous segment (a walk's direction along a path).
 type Advance = fn(&Path, usize) -> Option<usize>;
@@ -101,6 +103,8 @@ pub struct Path {
     /// `bucket[b]` = the segment holding arc length `b * length / n_seg`:
     /// O(1) arc-length look-ups also on unevenly sampled paths.
     bucket: Vec<u32>,
+    /// `n_seg / length`: arc length to bucket index.
+    bucket_scale: f64,
     tangent_sampling_width_m: f64,
     window_back_m: f64,
     window_ahead_m: f64,
@@ -247,6 +251,7 @@ impl Path {
             .collect();
         Ok(Path {
             bucket,
+            bucket_scale: n_seg as f64 / length,
             points: pts,
             s,
             seg_dir,
@@ -569,8 +574,9 @@ impl Path {
         // The bucket of `s` names the segment holding the bucket's start; a
         // few steps forward find the one holding `s` (one step on evenly
         // sampled paths), else binary search.
-        if s.is_finite() && s > 0.0 {
-            let b = (((s / self.length) * n_seg as f64) as usize).min(n_seg - 1);
+        // (Any start gives the same answer: the bucket only saves steps.)
+        if s > 0.0 && s < f64::INFINITY {
+            let b = ((s * self.bucket_scale) as u32 as usize).min(n_seg - 1);
             let mut k = self.bucket[b] as usize;
             for _ in 0..8 {
                 if s < self.s[k] {
@@ -587,6 +593,33 @@ impl Path {
         }
         let k = self.s[1..n_seg].partition_point(|&b| b <= s);
         (k, s - self.s[k])
+    }
+
+    /// [`Self::locate`] from a guess of the segment (`hint`, e.g. the segment
+    /// of a projection near `s`): a few steps from the guess to the segment
+    /// holding `s`, else (a guess out of range, too far off, or a non-finite
+    /// `s`) the bucket look-up. The answer is `locate`'s whatever the guess.
+    #[inline]
+    fn locate_from(&self, s: f64, hint: usize) -> (usize, f64) {
+        let n_seg = self.seg_len.len();
+        if hint < n_seg {
+            let w = self.wrap_s(s);
+            if w.is_finite() {
+                // (n_seg + 1 entries: no bounds checks in the walk)
+                let starts = &self.s[..=n_seg];
+                let mut k = hint;
+                for _ in 0..LOCATE_STEPS {
+                    if k > 0 && w < starts[k] {
+                        k -= 1;
+                    } else if k + 1 < n_seg && w >= starts[k + 1] {
+                        k += 1;
+                    } else {
+                        return (k, w - starts[k]);
+                    }
+                }
+            }
+        }
+        self.locate(s)
     }
 
     #[inline]
@@ -615,6 +648,13 @@ impl Path {
         self.seg_heading(k, off)
     }
 
+    /// [`Self::heading_at`] with a guess of the segment holding `s` (any
+    /// value is fine; one near `s` saves the look-up).
+    pub fn heading_at_from(&self, s: f64, segment_hint: usize) -> f64 {
+        let (k, off) = self.locate_from(s, segment_hint);
+        self.seg_heading(k, off)
+    }
+
     /// Unit tangent at arc length `s`.
     pub fn tangent_at(&self, s: f64) -> Vector2<f64> {
         let h = self.heading_at(s);
@@ -627,8 +667,18 @@ impl Path {
         self.curvature_over(s, self.tangent_sampling_width_m)
     }
 
+    /// [`Self::curvature_at`] with a guess of the segment holding `s` (as
+    /// [`Self::heading_at_from`]).
+    pub fn curvature_at_from(&self, s: f64, segment_hint: usize) -> f64 {
+        self.curvature_over_from(s, self.tangent_sampling_width_m, segment_hint)
+    }
+
     /// Curvature at `s` sampled over `width_m`.
     pub fn curvature_over(&self, s: f64, width_m: f64) -> f64 {
+        self.curvature_over_from(s, width_m, usize::MAX)
+    }
+
+    fn curvature_over_from(&self, s: f64, width_m: f64, segment_hint: usize) -> f64 {
         let w = width_m.min(self.length);
         if !(w > 0.0) {
             return 0.0;
@@ -643,7 +693,7 @@ impl Path {
                 a = self.length - w;
             }
         }
-        wrap_angle(self.heading_at(b) - self.heading_at(a)) / w
+        wrap_angle(self.heading_at_from(b, segment_hint) - self.heading_at_from(a, segment_hint)) / w
     }
 
     /// Widths at `s`, interpolated between vertices; `None` if the path has none.
@@ -779,23 +829,36 @@ impl Path {
     /// third of its cost, and like it never jumps to another leg of the
     /// track. A non-finite hint falls back to the full search.
     pub fn project_near(&self, p: &Point2<f64>, hint_s: f64) -> Projection {
-        let (d2, k, t) = self.nearest_near(p, hint_s);
+        self.project_near_from(p, hint_s, usize::MAX)
+    }
+
+    /// [`Self::project_near`] with a guess of the segment holding `hint_s`
+    /// (any value is fine; the last step's `segment` saves a look-up).
+    pub fn project_near_from(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> Projection {
+        let (d2, k, t) = self.nearest_near(p, hint_s, segment_hint);
         self.make_projection_flat(p, k, t, d2)
     }
 
     /// The arc length of [`Self::project_near`]'s foot point alone (no
     /// heading, side or curvature).
     pub fn arc_near(&self, p: &Point2<f64>, hint_s: f64) -> f64 {
-        let (_, k, t) = self.nearest_near(p, hint_s);
+        self.arc_near_from(p, hint_s, usize::MAX).0
+    }
+
+    /// [`Self::arc_near`] with a guess of the segment holding `hint_s` (as
+    /// [`Self::project_near_from`]); also returns the foot point's segment.
+    pub fn arc_near_from(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> (f64, usize) {
+        let (_, k, t) = self.nearest_near(p, hint_s, segment_hint);
         let s = self.s[k] + t;
-        if self.closed && s >= self.length {
+        let s = if self.closed && s >= self.length {
             s - self.length
         } else {
             s
-        }
+        };
+        (s, k)
     }
 
-    fn nearest_near(&self, p: &Point2<f64>, hint_s: f64) -> (f64, usize, f64) {
+    fn nearest_near(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> (f64, usize, f64) {
         if !hint_s.is_finite() {
             return self.nearest_full(p);
         }
@@ -805,7 +868,7 @@ impl Path {
         } else {
             hint_s.clamp(0.0, self.length)
         };
-        let (k0, _) = self.locate(bound);
+        let (k0, _) = self.locate_from(bound, segment_hint);
         let (d0, t0) = self.seg_dist2(k0, p);
         let mut best = (d0, k0, t0);
         // Forward first; only if that did not move, backward.
@@ -986,6 +1049,96 @@ mod tests {
     }
 
     use super::*;
+
+    /// A deterministic stream of numbers in [0, 1) (no rand dependency).
+    fn uniform(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (*state >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    #[test]
+    fn a_segment_guess_never_changes_a_look_up() {
+        // Unevenly sampled (as SUMO lane shapes are), open and closed.
+        let mut pts = vec![[0.0, 0.0]];
+        let mut x = 0.0f64;
+        for i in 0..200 {
+            x += [0.01, 0.3, 40.0, 1.0, 2.5, 0.05, 7.0][i % 7];
+            pts.push([x, 3.0 * (0.05 * x).sin()]);
+        }
+        let mut rng = 7u64;
+        for closed in [false, true] {
+            let p = Path::new(&pts, None, closed).unwrap();
+            let (n, len) = (p.n_segments(), p.length());
+            let mut specials = vec![
+                0.0,
+                -0.0,
+                len,
+                -len,
+                2.0 * len,
+                -1e-300,
+                len - 1e-12,
+                f64::NAN,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+            ];
+            specials.extend(p.vertex_s().iter().copied());
+            let mut queries: Vec<f64> = (0..4000)
+                .map(|_| (3.0 * uniform(&mut rng) - 1.0) * len)
+                .collect();
+            queries.extend(specials);
+            for (j, &s) in queries.iter().enumerate() {
+                let exact = p.locate(s);
+                let k_true = exact.0;
+                let hints = [
+                    0,
+                    n - 1,
+                    n,
+                    usize::MAX,
+                    k_true,
+                    k_true.saturating_sub(3),
+                    (k_true + 5) % n,
+                    (uniform(&mut rng) * 1.2 * n as f64) as usize,
+                ];
+                for &h in &hints {
+                    let got = p.locate_from(s, h);
+                    assert_eq!(got.0, exact.0, "s = {s}, hint {h}, closed {closed}");
+                    assert!(
+                        got.1.to_bits() == exact.1.to_bits(),
+                        "s = {s}, hint {h}: offset {} vs {}",
+                        got.1,
+                        exact.1
+                    );
+                    let (a, b) = (p.heading_at_from(s, h), p.heading_at(s));
+                    assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()));
+                    let (a, b) = (p.curvature_at_from(s, h), p.curvature_at(s));
+                    assert!(a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()));
+                }
+                // Projections from a hint near the query point, with any guess.
+                if s.is_finite() && j % 4 == 0 {
+                    let q = p.point_at(s) + Vector2::new(0.3, -0.7 * uniform(&mut rng));
+                    let hint_s = s + 2.0 * uniform(&mut rng) - 1.0;
+                    let plain = p.project_near(&q, hint_s);
+                    let arc = p.arc_near(&q, hint_s);
+                    for &h in &hints {
+                        // (curvature is NaN in both: compared without it)
+                        let got = Projection {
+                            curvature_per_m: 0.0,
+                            ..p.project_near_from(&q, hint_s, h)
+                        };
+                        let want = Projection {
+                            curvature_per_m: 0.0,
+                            ..plain
+                        };
+                        assert_eq!(got, want, "s = {s}, hint {h}");
+                        let (a, k) = p.arc_near_from(&q, hint_s, h);
+                        assert_eq!((a.to_bits(), k), (arc.to_bits(), plain.segment));
+                    }
+                }
+            }
+        }
+    }
 
     #[test]
     fn wrap_angle_range() {

@@ -459,6 +459,8 @@ struct Driven {
     body: Body,
     state: VehicleState,
     s_front_m: f64,
+    /// The segment of the path holding `s_front_m` (a look-up guess).
+    seg_front: usize,
     next_stop: usize,
     /// (stop index, stop?) decided when the light ahead turned yellow.
     yellow: Option<(usize, bool)>,
@@ -745,6 +747,7 @@ impl RouteFleet {
             body,
             state,
             s_front_m,
+            seg_front: usize::MAX,
             next_stop: 0,
             yellow: None,
             holding: None,
@@ -772,6 +775,7 @@ impl RouteFleet {
         let d = self.driven[slot as usize].as_mut().expect("checked above");
         d.route = route;
         d.s_front_m = s_front_m;
+        d.seg_front = usize::MAX;
         d.next_stop = 0;
         d.yellow = None;
         d.holding = None;
@@ -1076,7 +1080,7 @@ impl RouteFleet {
             }
         }
         let n = plan.slots.len();
-        let mut cols: [Vec<f64>; 5] = Default::default();
+        let mut cols: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
         for &slot in &plan.slots {
             let s = self.driven[slot as usize]
                 .as_ref()
@@ -1143,7 +1147,9 @@ impl RouteFleet {
                     .fleet
                     .track(self.fleet.vehicle_track(slot as i64)? as i64)?
                     .path;
-                path.arc_near(&Point2::new(xf, yf), d.s_front_m + v * dt_s)
+                let (s, seg) = path.arc_near_from(&Point2::new(xf, yf), d.s_front_m + v * dt_s, d.seg_front);
+                d.seg_front = seg;
+                s
             } else {
                 f64::NAN
             };
