@@ -859,15 +859,10 @@ impl Path {
     }
 
     fn nearest_near(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> (f64, usize, f64) {
-        if !hint_s.is_finite() {
+        let Some(bound) = self.hint_bound(hint_s) else {
             return self.nearest_full(p);
-        }
-        let n_seg = self.seg_len.len();
-        let bound = if self.closed {
-            hint_s
-        } else {
-            hint_s.clamp(0.0, self.length)
         };
+        let n_seg = self.seg_len.len();
         let (k0, _) = self.locate_from(bound, segment_hint);
         let (d0, t0) = self.seg_dist2(k0, p);
         let mut best = (d0, k0, t0);
@@ -876,6 +871,20 @@ impl Path {
             self.descend(p, k0, Self::prev_seg, &mut best, n_seg);
         }
         best
+    }
+
+    /// Where a projection hint starts its search: the hint itself on a closed
+    /// path, clamped to the path on an open one; None for a non-finite hint
+    /// (the caller then searches the whole path).
+    #[inline]
+    fn hint_bound(&self, hint_s: f64) -> Option<f64> {
+        if !hint_s.is_finite() {
+            None
+        } else if self.closed {
+            Some(hint_s)
+        } else {
+            Some(hint_s.clamp(0.0, self.length))
+        }
     }
 
     /// The segment after / before `k`, wrapping on closed paths.
@@ -913,15 +922,10 @@ impl Path {
 
     /// (squared distance, segment, offset) of the hinted nearest point.
     fn nearest_hinted(&self, p: &Point2<f64>, hint_s: f64) -> (f64, usize, f64) {
-        if !hint_s.is_finite() {
+        let Some(bound) = self.hint_bound(hint_s) else {
             return self.nearest_full(p);
-        }
-        let n_seg = self.seg_len.len();
-        let bound = if self.closed {
-            hint_s
-        } else {
-            hint_s.clamp(0.0, self.length)
         };
+        let n_seg = self.seg_len.len();
         let (k0, _) = self.locate(bound);
         let hint = self.wrap_s(hint_s);
         let mut best = {
