@@ -132,3 +132,20 @@ def test_help_documents_every_option(command: str) -> None:
     }[command]
     for flag in flags:
         assert flag in r.stdout, flag
+
+
+def test_a_config_or_track_that_is_not_a_readable_file_says_why(tmp_path: Path) -> None:
+    """A folder, a device and a missing name are three different mistakes:
+    one line each, naming the file and what is wrong, exit code 2."""
+    cases = [
+        (("sumo", "run", "ring_single_lane", "--config", str(tmp_path)), "a folder, not a file"),
+        (("sumo", "run", "ring_single_lane", "--config", "/dev/null"), "not a regular file"),
+        (("sumo", "run", "ring_single_lane", "--config", str(tmp_path / "none.toml")), "no such file"),
+        (("sim", "--track", str(tmp_path)), "a folder, not a file"),
+    ]
+    for args, why in cases:
+        r = _cli(*args, "--out", str(tmp_path / "out"))
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1, (args, r.stderr)
+        assert why in lines[0] and args[-1] in lines[0], (args, lines[0])
+    assert not (tmp_path / "out").exists(), "nothing written"

@@ -43,6 +43,15 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
+
+def _require_file(name: str, kind: str, error: type[Exception]) -> None:
+    """Raises ``error`` naming ``name`` and why it cannot be read as a ``kind`` file."""
+    from blendtrack.simulation import file_problem
+
+    problem = file_problem(name)
+    if problem:
+        raise error(f"cannot read {kind} file {name}: {problem}")
+
 def _cmd_version(args: argparse.Namespace) -> int:
     print(blendtrack.__version__)
     return 0
@@ -85,8 +94,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     config = blendtrack.ControllerConfig()
     vehicle = blendtrack.VehicleParams()
     if args.config is not None:
-        if not FsPath(args.config).is_file():
-            raise blendtrack.ConfigError(f"cannot read config file {args.config}: no such file")
+        _require_file(args.config, "config", blendtrack.ConfigError)
         config, vehicle = blendtrack.load_config(args.config)
     overrides: dict[str, object] = {}
     if args.controller is not None:
@@ -147,8 +155,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 def _cmd_paper(args: argparse.Namespace) -> int:
     from blendtrack import paper
 
-    if not FsPath(args.track).is_file():
-        raise blendtrack.PathError(f"cannot read track file {args.track}: no such file")
+    _require_file(args.track, "track", blendtrack.PathError)
     report = paper.reproduce(
         FsPath(args.track),
         FsPath(args.out),
@@ -254,8 +261,7 @@ def _sumo_config(
 
     if file is None:
         return None, None, set()
-    if not FsPath(file).is_file():
-        raise blendtrack.ConfigError(f"cannot read config file {file}: no such file")
+    _require_file(file, "config", blendtrack.ConfigError)
     config, vehicle = blendtrack.load_config(file)
     return config, vehicle, sumo.config_keys(file)
 

@@ -9,6 +9,8 @@ the native call's arguments.
 
 from __future__ import annotations
 
+import os
+
 import math
 from collections.abc import Callable, Mapping
 from pathlib import Path as FsPath
@@ -61,6 +63,18 @@ EXTRA_METRIC_KEYS = (
 )
 
 
+
+def file_problem(name: str | os.PathLike[str]) -> str | None:
+    """Why ``name`` cannot be read as a data file, in a few words (None: it can)."""
+    p = FsPath(name)
+    if p.is_file():
+        return None
+    if not p.exists():
+        return "no such file"
+    if p.is_dir():
+        return "a folder, not a file"
+    return "not a regular file"
+
 def _number(text: str, what: str, spec: str) -> float:
     try:
         value = float(text)
@@ -91,8 +105,9 @@ def load_track(spec: str, scale: float | None = None) -> Path:
     elif key in BUILTIN_TRACKS and not arg:
         path = Path.test_track(1.0)
     elif FsPath(name).suffix.lower() == ".csv" or FsPath(name).exists():
-        if not FsPath(name).is_file():
-            raise PathError(f"cannot read track file {name}: no such file")
+        problem = file_problem(name)
+        if problem:
+            raise PathError(f"cannot read track file {name}: {problem}")
         path = Path.from_tum_csv(name, True)
     else:
         choices = ", ".join(["straight[:LENGTH]", "circle:RADIUS", *BUILTIN_TRACKS, "FILE.csv"])
