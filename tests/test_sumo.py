@@ -139,7 +139,7 @@ def test_grid_with_every_vehicle_controlled_has_no_junction_collision(tmp_path: 
 def test_body_and_distance_to_a_path_in_closed_form() -> None:
     """A 4.5 m x 1.8 m vehicle facing east (SUMO angle 90, clockwise from
     north) with its front at (10, 0)."""
-    from blendtrack.sumo.runner import _body_points, _segments_distance
+    from blendtrack.sumo.runner import _body_segment, _segments_distance
 
     class Veh:
         def getPosition(self, vid: str) -> tuple[float, float]:
@@ -154,7 +154,7 @@ def test_body_and_distance_to_a_path_in_closed_form() -> None:
         def getWidth(self, vid: str) -> float:
             return 1.8
 
-    body, half = _body_points(Veh(), "x")
+    body, half = _body_segment(Veh(), "x")
     assert body == pytest.approx(np.array([[5.5, 0.0], [10.0, 0.0]]))
     assert half == pytest.approx(0.9)
     # A path crossing 3 m ahead of the front, from south to north.

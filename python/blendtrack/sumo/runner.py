@@ -883,7 +883,6 @@ class SumoRun:
         poss = [get_pos(vid) for _, vid in read]
         if self._changing:
             # The lane changers' leaders need SUMO's word (and a look at the target lane).
-            index = self._index
             pos = {i: k for k, i in enumerate(asked)}
             for act in self._changing.values():
                 i = index[act.vid]
@@ -1205,23 +1204,28 @@ class SumoRun:
         if not lanes:
             return False
         veh = self.sumo.vehicle
-        step, listed = self._lane_ids_step
-        if step != self._steps:
-            listed = {}
-            self._lane_ids_step = (self._steps, listed)
         reach = 0.5 * float(veh.getWidth(vid)) + INSIDE_MARGIN_M
         for lane in lanes:
-            ids = listed.get(lane)
-            if ids is None:
-                ids = listed[lane] = self._lane_vehicles(lane)
-            for other in ids:
+            for other in self._vehicles_on(lane):
                 if other == vid:
                     continue
-                body, half = _body_points(veh, other)
+                body, half = _body_segment(veh, other)
                 if _segments_distance(body, path) < reach + half:
                     self.counts["inside_junction_waits"] += 1
                     return True
         return False
+
+    def _vehicles_on(self, lane: str) -> Any:
+        """SUMO's list of the vehicles on ``lane`` this step, read once a step
+        (several vehicles ask about the lanes of one junction)."""
+        step, listed = self._lane_ids_step
+        if step != self._steps:
+            listed = {}
+            self._lane_ids_step = (self._steps, listed)
+        ids = listed.get(lane)
+        if ids is None:
+            ids = listed[lane] = self._lane_vehicles(lane)
+        return ids
 
     def _connection_of(self, via: str) -> Any:
         """The network connection whose junction lanes include ``via`` (None if none)."""
@@ -1270,14 +1274,15 @@ class SumoRun:
         inside the junction, or about to enter it through an open link?
 
         SUMO's ``getNextLinks`` does not report this internal link, and SUMO
-        does not register a vehicle moved by blendtrack as approaching it, so
+        registers a controlled vehicle as approaching a link only while its
+        own movement carries it (not after a ``moveTo`` or ``moveToXY``), so
         the check is ours: a vehicle on a foe junction lane, or one on the
         lane leading to it, with its link open, within ``INTERNAL_YIELD_S``
         seconds or ``INTERNAL_YIELD_NEAR_M`` metres of the stop line.
         """
-        lane_api, veh = self.sumo.lane, self.sumo.vehicle
+        veh = self.sumo.vehicle
         for foe, incoming, length, tls, link in self._internal_foes(via):
-            if any(other != vid for other in lane_api.getLastStepVehicleIDs(foe)):
+            if any(other != vid for other in self._vehicles_on(foe)):
                 return True
             if incoming is None:
                 continue
@@ -1285,7 +1290,7 @@ class SumoRun:
                 state = self._tls_state.get(tls, "")
                 if 0 <= link < len(state) and state[link] not in "GgsOo":
                     continue  # the foe's light is red or yellow: it stops
-            for other in lane_api.getLastStepVehicleIDs(incoming):
+            for other in self._vehicles_on(incoming):
                 if other == vid:
                     continue
                 dist = length - veh.getLanePosition(other)
@@ -1385,7 +1390,7 @@ def _parse_like(raw: str, current: Any) -> Any:
     return raw.strip()
 
 
-def _body_points(veh: Any, vid: str) -> tuple[np.ndarray, float]:
+def _body_segment(veh: Any, vid: str) -> tuple[np.ndarray, float]:
     """A vehicle's body as SUMO has it: its centreline from the back to the
     front point (2 x 2) and its half width (from SUMO's front point, angle,
     length and width)."""

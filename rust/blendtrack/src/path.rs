@@ -742,12 +742,7 @@ impl Path {
         } else {
             -dist2.sqrt()
         };
-        let s = self.s[k] + t;
-        let s = if self.closed && s >= self.length {
-            s - self.length
-        } else {
-            s
-        };
+        let s = self.foot_s(k, t);
         Projection {
             s,
             foot,
@@ -849,13 +844,7 @@ impl Path {
     /// [`Self::project_near_from`]); also returns the foot point's segment.
     pub fn arc_near_from(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> (f64, usize) {
         let (_, k, t) = self.nearest_near(p, hint_s, segment_hint);
-        let s = self.s[k] + t;
-        let s = if self.closed && s >= self.length {
-            s - self.length
-        } else {
-            s
-        };
-        (s, k)
+        (self.foot_s(k, t), k)
     }
 
     fn nearest_near(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> (f64, usize, f64) {
@@ -871,6 +860,18 @@ impl Path {
             self.descend(p, k0, Self::prev_seg, &mut best, n_seg);
         }
         best
+    }
+
+    /// Arc length of the point `t` metres into segment `k` (the closing
+    /// segment's end is 0 on a closed path).
+    #[inline]
+    fn foot_s(&self, k: usize, t: f64) -> f64 {
+        let s = self.s[k] + t;
+        if self.closed && s >= self.length {
+            s - self.length
+        } else {
+            s
+        }
     }
 
     /// Where a projection hint starts its search: the hint itself on a closed
