@@ -404,6 +404,39 @@ def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -
     assert all(r.end_s >= r.depart_s for r in result.records)
 
 
+def test_a_vehicle_handed_back_drives_on_under_sumo(tmp_path: Path) -> None:
+    """A controlled vehicle handed back to SUMO (what a teleport or an
+    unusable state does) is free of blendtrack's last speed command: one
+    handed back while standing at a red light drives off when it turns green.
+    SUMO keeps a setSpeed in force until setSpeed(-1), so without the release
+    it would stand there for good (seen on the highway: a ramp vehicle
+    teleported from the end of the acceleration lane stood on the mainline)."""
+    sc = sumo.resolve_scenario("urban_grid")
+    run = SumoRun(sc, RunOptions(end_s=200, progress=False), tmp_path)
+    handed: dict[str, float] = {}
+    speeds: list[float] = []
+
+    def hand_back(r: SumoRun, t: float) -> None:
+        v = r.sumo.vehicle
+        if not handed and t >= 40.0:
+            for vid in sorted(r.active):
+                if v.getSpeed(vid) < 0.05 and v.getLanePosition(vid) > 20.0 and not v.getLaneID(vid).startswith(":"):
+                    r._drop(vid, t, "handed_back")
+                    handed[vid] = t
+                    return
+        elif handed:
+            vid = next(iter(handed))
+            if vid in v.getIDList():
+                speeds.append(float(v.getSpeed(vid)))
+
+    run.step_hooks.append(hand_back)
+    result = run.run()
+    assert handed, "some controlled vehicle waits at a red light after 40 s"
+    vid = next(iter(handed))
+    assert vid not in run.active and {r.vid: r for r in result.records}[vid].reason == "handed_back"
+    assert max(speeds) > 5.0, f"{vid} handed back at {handed[vid]} s stood still (max speed {max(speeds):.2f} m/s)"
+
+
 def test_rerouted_vehicle_gets_a_new_track_and_drives_on(tmp_path: Path) -> None:
     """A route changed by another client (a new destination) is noticed and
     the track rebuilt; the vehicle is neither dropped nor stopped."""

@@ -715,10 +715,18 @@ class SumoRun:
             rec.teleports += 1
         if reason not in ("arrived", "end"):
             # Hand the vehicle back to SUMO's own models if it is still there.
+            # setSpeed(-1) ends the last speed command: SUMO keeps applying
+            # one until told otherwise, even after a teleport, so a vehicle
+            # that waited at standstill would stand for good.
+            self._hand_back(vid)
+
+    def _hand_back(self, vid: str) -> None:
+        """SUMO's own driving for ``vid`` again (each call on its own: one
+        failing, say on a vehicle gone meanwhile, does not skip the rest)."""
+        v = self.sumo.vehicle
+        for call, args in ((v.setSpeed, (-1.0,)), (v.setSpeedMode, (31,)), (v.setLaneChangeMode, (1621,)), (v.unsubscribe, ())):
             try:
-                self.sumo.vehicle.setSpeedMode(vid, 31)
-                self.sumo.vehicle.setLaneChangeMode(vid, 1621)
-                self.sumo.vehicle.unsubscribe(vid)
+                call(vid, *args)
             except Exception:
                 pass
 
