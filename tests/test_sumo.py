@@ -344,6 +344,33 @@ def test_border_margin_widens_the_virtual_borders_and_eases_the_curves(tmp_path:
         RunOptions(border_margin_m=-1.0)
 
 
+def test_controlled_vehicles_leave_at_speed_unless_told_to_stop_at_the_route_end(tmp_path: Path) -> None:
+    """SUMO's drivers leave the network at their route's end at speed (its
+    default arrivalSpeed "current"), and so do blendtrack's; with
+    --stop-at-route-end they brake for a standing obstacle 5 m past it (SUMO
+    takes them out at the lane's end, at about 6 m/s). Read off SUMO's
+    tripinfo arrivalSpeed on the highway (every vehicle controlled, the exit
+    at 33 m/s)."""
+
+    def arrival_speeds(out: Path) -> list[float]:
+        root = ET.parse(out / "sumo" / "tripinfo.xml").getroot()
+        return [float(t.get("arrivalSpeed", "nan")) for t in root.iter("tripinfo") if float(t.get("arrival", "-1")) >= 0]
+
+    sc = sumo.resolve_scenario("highway_onramp")
+    sumo.run_scenario(sc, RunOptions(controlled_fraction=1.0, end_s=200, progress=False), tmp_path / "leave")
+    r = subprocess.run(
+        [sys.executable, "-m", "blendtrack.cli", "sumo", "run", "highway_onramp", "--controlled-fraction", "1", "--end", "200",
+         "--stop-at-route-end", "--quiet", "--out", str(tmp_path / "stop")],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert r.returncode == 0, r.stderr
+    assert json.loads((tmp_path / "stop" / "summary.json").read_text())["stop_at_route_end"] is True
+    leave, stop = arrival_speeds(tmp_path / "leave"), arrival_speeds(tmp_path / "stop")
+    assert len(leave) >= 20 and len(stop) >= 20, (len(leave), len(stop))
+    assert float(np.median(leave)) > 15.0, np.median(leave)
+    assert float(np.median(stop)) < 8.0, np.median(stop)
+
+
 def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """libsumo crashes on some malformed networks, so a scenario is first
     loaded in a child sumo; one that loaded before, byte for byte, is not

@@ -210,6 +210,7 @@ class RouteFleet:
         standstill_margin_m: float = 1.0,
         yield_lookahead_m: float = 30.0,
         lane_change_room_m: float = 15.0,
+        stop_at_route_end: bool = False,
         route_end_extra_m: float = 5.0,
         route_end_horizon_m: float = 200.0,
         lane_move_lateral_m: float = 0.15,

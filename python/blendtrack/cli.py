@@ -281,6 +281,7 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         vehicle=vehicle,
         fixed_keys=frozenset(keys),
         border_margin_m=args.border_margin,
+        stop_at_route_end=args.stop_at_route_end,
         end_s=args.end,
         seed=args.seed,
         backend="traci" if args.gui else args.backend,
@@ -316,6 +317,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         vehicle=vehicle,
         fixed_keys=frozenset(keys),
         border_margin_m=args.border_margin,
+        stop_at_route_end=args.stop_at_route_end,
     )
     opts = compare.CompareOptions(
         baseline=args.baseline,
@@ -342,13 +344,18 @@ def _seeds(text: str) -> int:
     return value
 
 
-def _add_border_margin(parser: argparse.ArgumentParser) -> None:
+def _add_driving_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--border-margin",
         type=_finite("border margin", 0.0),
         default=0.0,
         metavar="M",
         help="widen the virtual borders by M metres on each side of the lane (>= 0; default 0: the lane's width)",
+    )
+    parser.add_argument(
+        "--stop-at-route-end",
+        action="store_true",
+        help="controlled vehicles stop at the end of their route (default: they leave at speed, as SUMO's drivers do)",
     )
 
 
@@ -382,7 +389,7 @@ def _add_compare_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> N
     which.add_argument("--controlled-type", metavar="T", help="control every vehicle of vType T (default: vTypes with blendtrack.controlled=true)")
     cmp.add_argument("--alpha", type=_finite("alpha", 0.0, high=1.0), metavar="A", help="blend factor for every controlled vehicle")
     cmp.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
-    _add_border_margin(cmp)
+    _add_driving_options(cmp)
     cmp.add_argument("--seeds", type=_seeds, default=3, metavar="N", help="run seeds 0..N-1 (default 3)")
     cmp.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
     cmp.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -543,7 +550,7 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
     )
     run.add_argument("--alpha", type=_finite("alpha", 0.0, high=1.0), metavar="A", help="blend factor for every controlled vehicle (0 = rear axle, 1 = front axle)")
     run.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
-    _add_border_margin(run)
+    _add_driving_options(run)
     run.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
     run.add_argument("--seed", type=int, default=0, metavar="N", help="seed of SUMO and of the vehicle selection (default 0)")
     run.add_argument("--gui", action="store_true", help="show the run in sumo-gui (through TraCI)")

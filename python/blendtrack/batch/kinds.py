@@ -132,6 +132,7 @@ def _run_options(task: dict[str, Any]) -> Any:
         controlled_type=p.get("controlled_type"),
         max_controlled=p.get("max_controlled"),
         border_margin_m=p.get("border_margin_m", 0.0),
+        stop_at_route_end=p.get("stop_at_route_end", False),
         config=config,
         vehicle=vehicle,
         fixed_keys=frozenset(keys),

@@ -222,6 +222,10 @@ class RunOptions:
     #: let the ray cast see further through a curve, so the curvature-aware
     #: law slows a vehicle less there.
     border_margin_m: float = 0.0
+    #: Stop at the end of the route (a standing obstacle there). By default
+    #: controlled vehicles, like SUMO's drivers (``arrivalSpeed="current"``),
+    #: leave the network at their route's end without slowing down.
+    stop_at_route_end: bool = False
 
     def __post_init__(self) -> None:
         m = self.border_margin_m
@@ -310,6 +314,7 @@ class SumoRun:
             standstill_margin_m=options.standstill_margin_m,
             yield_lookahead_m=YIELD_LOOKAHEAD_M,
             lane_change_room_m=LANE_CHANGE_ROOM_M,
+            stop_at_route_end=options.stop_at_route_end,
             lane_move_lateral_m=CHEAP_LATERAL_M,
             lane_move_heading_deg=math.degrees(CHEAP_HEADING_RAD),
             comfort_lateral_accel_mps2=scenario.comfort_lateral_accel_mps2,
@@ -766,6 +771,7 @@ class SumoRun:
             "steps_per_second": steps / wall if wall > 0 else math.nan,
             "comfort_lateral_accel_mps2": self.scenario.comfort_lateral_accel_mps2,
             "border_margin_m": self.opt.border_margin_m,
+            "stop_at_route_end": self.opt.stop_at_route_end,
             "moves_speed_only": self.moves["speed"],
             "moves_none": self.moves["none"],
             "moves_lane_position": self.moves["lane"],

@@ -116,12 +116,13 @@ impl Hasher for Fnv {
 #[pymethods]
 impl RouteFleet {
     #[new]
-    #[pyo3(signature = (*, standstill_margin_m = 1.0, yield_lookahead_m = 30.0, lane_change_room_m = 15.0, route_end_extra_m = 5.0, route_end_horizon_m = 200.0, lane_move_lateral_m = 0.15, lane_move_heading_deg = 2.0, comfort_lateral_accel_mps2 = 2.0, sample_every = 10, verify_every = 10))]
+    #[pyo3(signature = (*, standstill_margin_m = 1.0, yield_lookahead_m = 30.0, lane_change_room_m = 15.0, stop_at_route_end = false, route_end_extra_m = 5.0, route_end_horizon_m = 200.0, lane_move_lateral_m = 0.15, lane_move_heading_deg = 2.0, comfort_lateral_accel_mps2 = 2.0, sample_every = 10, verify_every = 10))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         standstill_margin_m: f64,
         yield_lookahead_m: f64,
         lane_change_room_m: f64,
+        stop_at_route_end: bool,
         route_end_extra_m: f64,
         route_end_horizon_m: f64,
         lane_move_lateral_m: f64,
@@ -134,6 +135,7 @@ impl RouteFleet {
             standstill_margin_m,
             yield_lookahead_m,
             lane_change_room_m,
+            stop_at_route_end,
             route_end_extra_m,
             route_end_horizon_m,
             lane_move_lateral_m,

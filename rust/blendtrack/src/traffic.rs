@@ -23,7 +23,8 @@
 //!    priority needs the simulator's word on approaching foes, so `plan`
 //!    returns the vehicles to ask about; any link waits when the vehicle's
 //!    leader leaves no room behind it beyond the junction (keep the junction
-//!    clear); the end of the route is a standing obstacle.
+//!    clear); the end of the route is a standing obstacle only with
+//!    `stop_at_route_end` (SUMO's drivers leave at speed).
 //! 2. [`RouteFleet::step`] takes the answers, runs the controllers and the
 //!    bicycle model for everyone, and returns for each vehicle how to put the
 //!    new pose into the simulator, cheapest first: [`Move::Hold`] (nothing to
@@ -297,7 +298,14 @@ pub struct TrafficSettings {
     pub yield_lookahead_m: f64,
     /// Room kept before a lane's end when a lane change is due (m).
     pub lane_change_room_m: f64,
-    /// The end of the route is an obstacle this far past the track's end (m)...
+    /// Whether the end of the route is a standing obstacle. SUMO's drivers
+    /// leave the network at their route's end without slowing down (its
+    /// default `arrivalSpeed="current"`), so by default blendtrack's do too;
+    /// with this set a vehicle stops at its route's end, like the end of a
+    /// race track's path in the paper.
+    pub stop_at_route_end: bool,
+    /// With `stop_at_route_end`, the end of the route is an obstacle this far
+    /// past the track's end (m)...
     pub route_end_extra_m: f64,
     /// ... once it is closer than this (m).
     pub route_end_horizon_m: f64,
@@ -319,6 +327,7 @@ impl Default for TrafficSettings {
             standstill_margin_m: 1.0,
             yield_lookahead_m: 30.0,
             lane_change_room_m: 15.0,
+            stop_at_route_end: false,
             route_end_extra_m: 5.0,
             route_end_horizon_m: 200.0,
             lane_move_lateral_m: 0.15,
@@ -1015,14 +1024,19 @@ impl RouteFleet {
                     }
                 }
             }
-            // The end of the route: a standing obstacle a little past the
-            // track's end, so the vehicle slows down and the simulator sees it
-            // arrive. A track that stops where a lane change is due ends
-            // lane_change_room_m early instead: the vehicle waits there for a gap.
+            // A track that stops where a lane change is due ends
+            // lane_change_room_m early: the vehicle waits there for a gap.
+            // The end of the route (with stop_at_route_end): a standing
+            // obstacle a little past the track's end, so the vehicle slows
+            // down and the simulator sees it arrive. Otherwise the vehicle
+            // drives through its route's end and the simulator's own movement
+            // (a speed move near a lane's end) carries it out.
             let end_gap = if route.lane_change.is_some() {
                 route.length_m - st.lane_change_room_m - sf - margin
-            } else {
+            } else if st.stop_at_route_end {
                 route.length_m + st.route_end_extra_m - sf
+            } else {
+                f64::INFINITY
             };
             if end_gap < st.route_end_horizon_m {
                 stop_gap = if stop_gap.is_nan() {
@@ -1390,7 +1404,11 @@ mod tests {
     }
 
     fn fleet_on(route: (Path, Route)) -> (RouteFleet, i64) {
-        let mut f = RouteFleet::new(TrafficSettings::default()).unwrap();
+        fleet_with(route, TrafficSettings::default())
+    }
+
+    fn fleet_with(route: (Path, Route), settings: TrafficSettings) -> (RouteFleet, i64) {
+        let mut f = RouteFleet::new(settings).unwrap();
         let cfg = ControllerConfig {
             preferred_speed: 15.0,
             ..Default::default()
@@ -1725,8 +1743,12 @@ mod tests {
     }
 
     #[test]
-    fn the_vehicle_slows_for_the_end_of_its_route() {
-        let (mut f, t) = fleet_on(road(None, true));
+    fn the_vehicle_stops_at_the_end_of_its_route_when_set_to() {
+        let settings = TrafficSettings {
+            stop_at_route_end: true,
+            ..Default::default()
+        };
+        let (mut f, t) = fleet_with(road(None, true), settings);
         let a = f
             .add_vehicle(t, None, None, body(), at(400.0, 15.0))
             .unwrap() as i64;
@@ -1738,6 +1760,29 @@ mod tests {
             sf > 590.0 && sf < 605.0,
             "stops around the route's end (+5 m): {sf}"
         );
+    }
+
+    #[test]
+    fn by_default_the_vehicle_drives_through_the_end_of_its_route() {
+        // Like SUMO's drivers (arrivalSpeed "current"): no slowing down for
+        // the route's end at 600 m; the simulator takes the vehicle out there.
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(400.0, 15.0))
+            .unwrap() as i64;
+        let mut slowest = f64::INFINITY;
+        while f.s_front(a).unwrap() < 600.0 {
+            let out = step(&mut f, &[a], false).1;
+            assert!(out.moves[0] != Move::Invalid);
+            slowest = slowest.min(out.v_mps[0]);
+        }
+        assert!(slowest > 14.5, "kept its speed to the end: slowest {slowest} m/s");
+        // A few steps past the end (the simulator is late to take it out):
+        // still a usable move, no panic.
+        for _ in 0..10 {
+            let out = step(&mut f, &[a], false).1;
+            assert!(out.moves[0] != Move::Invalid && out.v_mps[0].is_finite());
+        }
     }
 
     #[test]
