@@ -76,6 +76,14 @@ LANE_CHANGE_GAP_M = 5.0
 # A lane change whose vehicle is still within this distance (m) of its lane's
 # centre is checked again every step and given up when the room has gone.
 ABORT_CHANGE_LAT_M = 0.5
+# Courtesy to a vehicle waiting to change lanes onto a controlled vehicle's
+# lane (a merge at the end of an acceleration lane): the nearest controlled
+# follower on the target lane (up to COURTESY_RANGE_M behind it) that can do so
+# braking at most COURTESY_DECEL_MPS2 takes it as its leader and opens the gap;
+# nearer ones drive on. SUMO's drivers do the like for each other (LC2013's
+# cooperative speed adaptation), but not for vehicles blendtrack drives.
+COURTESY_DECEL_MPS2 = 2.0
+COURTESY_RANGE_M = 150.0
 # How far before a junction without priority a vehicle asks SUMO whether foes approach (m).
 YIELD_LOOKAHEAD_M = 30.0
 # A controlled vehicle's route id is compared with SUMO's every this many steps
@@ -359,10 +367,12 @@ class SumoRun:
         self._changing: dict[str, _Active] = {}
         #: Vehicles where a lane change is due: (vid, lane, lane position, speed).
         self._lane_change_due: list[tuple[str, int, float, float]] = []
+        #: This step's courtesy leaders: follower id -> (lane changer id, gap m).
+        self._courtesy: dict[str, tuple[str, float]] = {}
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0, "inside_junction_waits": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0, "inside_junction_waits": 0, "courtesy_steps": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         #: Moves by kind (see RouteFleet): speed only, nothing to send,
         #: (lane, position), (x, y, angle).
@@ -779,6 +789,7 @@ class SumoRun:
             "reroutes": self.counts["reroutes"],
             "lane_changes_aborted": self.counts["lane_changes_aborted"],
             "inside_junction_waits": self.counts["inside_junction_waits"],
+            "courtesy_steps": self.counts["courtesy_steps"],
         }
         samples = self.fleet.take_samples()
         return RunResult(self.records, summary, self._trajectories, samples)
@@ -905,6 +916,9 @@ class SumoRun:
                     asked.append(i)
                     leaders.append(self._get_leader(act.vid, LEADER_RANGE_M))
             self._changing_leaders(leaders, pos)
+        if self._courtesy:
+            assert asked is not None
+            self._courtesy_leaders(leaders, {i: k for k, i in enumerate(asked)}, asked)
         return (asked, leaders), [i for i, _ in read], lanes, poss
 
     def _leaders(self) -> tuple[list[int] | None, list[Any]]:
@@ -942,6 +956,8 @@ class SumoRun:
         lanes = [lane_id(r.get(tc.VAR_LANE_ID, "")) for r in rows]
         poss = [float(r.get(tc.VAR_LANEPOSITION, math.nan)) for r in rows]
         self._changing_leaders(leaders, None)
+        if self._courtesy:
+            self._courtesy_leaders(leaders, None, None)
         return (None, leaders), list(range(len(rows))), lanes, poss
 
     def _changing_leaders(self, leaders: list[Any], pos: dict[int, int] | None) -> None:
@@ -982,8 +998,8 @@ class SumoRun:
         for nid, gap in v.getNeighbors(act.vid, 2 | (1 if direction < 0 else 0)):
             # A neighbour alongside (gap < 0) is no obstacle ahead: braking
             # would leave the vehicle standing across both lanes.
-            if gap >= 0.0 and (not (lead and lead[0] and lead[1] >= -100.0) or gap < lead[1]):
-                lead = (nid, gap)
+            if gap >= 0.0:
+                lead = self._tighter_leader(lead, (nid, gap))
         return lead
 
     def _control_step(self, t: float, comfort: float) -> None:
@@ -1110,7 +1126,9 @@ class SumoRun:
             return
         current = int(index)
         direction = 1 if target > current else -1
+        target_lane = f"{edge}_{target}"
         if not _could_change_lane(self._lane_change_state, act.vid, direction):
+            self._ask_courtesy(act.vid, target_lane, pos, speed)
             return
         lane_length = float(self._net_geometry().getLane(lane_id).getLength())
         length = min(max(2.0 * abs(speed), 10.0), 30.0, lane_length - pos - 1.0)
@@ -1122,12 +1140,82 @@ class SumoRun:
         # (its duration, at the present speed or 1 m/s, times the closing
         # speed) plus a margin.
         if not self._target_lane_clear(act.vid, direction, speed, length / max(abs(speed), 1.0)):
+            self._ask_courtesy(act.vid, target_lane, pos, speed)
             return
         geo2, track = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
         self.fleet.retrack(act.slot, track)
         act.geo = geo2
         self._set_changing(act, (direction, target))
         act.record.lane_changes += 1
+
+    def _ask_courtesy(self, vid: str, target_lane: str, pos: float, speed: float) -> None:
+        """``vid`` waits to change onto ``target_lane`` with its front at
+        ``pos``: the nearest controlled vehicle behind it there, within
+        ``COURTESY_RANGE_M``, that can stay behind it braking at most
+        ``COURTESY_DECEL_MPS2`` is given it as its leader this step (nearer
+        ones, too close to brake so gently, pass). Gaps as SUMO's leader gaps
+        (the changer's back less the follower's front and minGap), less the
+        room the change needs."""
+        v = self.sumo.vehicle
+        back = pos - float(v.getLength(vid))
+        for fid in reversed(self._vehicles_on(target_lane)):
+            f_pos = float(v.getLanePosition(fid))
+            if f_pos >= back:
+                continue  # ahead of the changer's back, or alongside
+            if back - f_pos > COURTESY_RANGE_M:
+                return
+            if fid not in self.active:
+                continue  # SUMO's own drivers cooperate in SUMO's way
+            # It stays back far enough for the change to start: the changer
+            # asks LANE_CHANGE_GAP_M of room (and a metre more, so a follower
+            # that creeps up does not close it again).
+            gap = back - f_pos - float(v.getMinGap(fid)) - LANE_CHANGE_GAP_M - 1.0
+            closing = max(float(v.getSpeed(fid)) - max(speed, 0.0), 0.0)
+            if gap > 0.5 and closing * closing <= 2.0 * COURTESY_DECEL_MPS2 * gap:
+                old = self._courtesy.get(fid)
+                if old is None or gap < old[1]:
+                    self._courtesy[fid] = (vid, gap)
+                return
+
+    def _courtesy_leaders(self, leaders: list[Any], pos: dict[int, int] | None, asked: list[int] | None) -> None:
+        """Each courtesy follower's leader becomes the lane changer it gives
+        way to, where the stopping law brakes harder for that than for its
+        own leader (``leaders`` and ``pos`` as in ``_changing_leaders``; a
+        follower not yet asked is added to ``asked``)."""
+        index = self._index
+        for fid, (cid, gap) in self._courtesy.items():
+            i = index.get(fid)
+            if i is None or cid not in index:
+                continue
+            if pos is None:
+                k = i
+            elif i in pos:
+                k = pos[i]
+            else:
+                assert asked is not None
+                k = pos[i] = len(asked)
+                asked.append(i)
+                leaders.append(self._get_leader(fid, LEADER_RANGE_M))
+            lead = self._tighter_leader(leaders[k], (cid, gap))
+            if lead[0] == cid:
+                leaders[k] = lead
+                self.counts["courtesy_steps"] += 1
+        self._courtesy = {}
+
+    def _tighter_leader(self, a: Any, b: tuple[str, float]) -> Any:
+        """Of two leaders (SUMO's ``(id, gap)``; ``a`` may be None or empty),
+        the one the stopping law brakes harder for: the smaller virtual
+        obstacle distance, gap plus the leader's braking distance at the
+        planning deceleration. Not simply the closer one: a near leader
+        pulling away matters less than a slower one further on, and following
+        only the near one runs into the other."""
+        if not (a and a[0] and a[1] >= -100.0):
+            return b
+        speed = self._get_speed
+        two_b = 2.0 * self._plan_decel
+        da = a[1] + max(float(speed(a[0])), 0.0) ** 2 / two_b
+        db = b[1] + max(float(speed(b[0])), 0.0) ** 2 / two_b
+        return b if db < da else a
 
     def _target_lane_clear(self, vid: str, direction: int, speed: float, duration: float) -> bool:
         """Room on the target lane for a change lasting ``duration`` seconds:
