@@ -232,23 +232,32 @@ def test_ramp_traffic_merges_with_every_vehicle_controlled(tmp_path: Path) -> No
     """On the highway at demand x2 with every vehicle controlled, nobody but
     blendtrack's own drivers can make room for a merging vehicle: a
     controlled follower on the target lane that can stay behind it braking
-    at most COURTESY_DECEL_MPS2 takes it as its leader. Without that 13 ramp
-    vehicles reached the mainline beyond the merge in 300 s (the rest stood
-    at the end of the acceleration lane for good); with it 33."""
+    at most COURTESY_DECEL_MPS2 takes it as its leader, and the merger lines
+    up behind the target lane's vehicles instead of driving level with one.
+    Without either, 13 ramp vehicles reached the mainline beyond the merge
+    in 300 s (the rest stood at the end of the acceleration lane for good);
+    with courtesy alone 33, the first merger standing at the lane's end at
+    92 s; with both 36, none standing there."""
     sc = sumo.resolve_scenario("highway_onramp")
     run = SumoRun(sc, RunOptions(controlled_fraction=1.0, end_s=300, sumo_args=("--scale", "2", "--no-warnings", "true"), progress=False), tmp_path)
     merged: set[str] = set()
+    standing: list[tuple[float, str]] = []
 
     def watch(r: SumoRun, t: float) -> None:
         if r._steps % 10 == 0:
+            v = r.sumo.vehicle
             for edge in ("hw_down", "hw_out"):
                 merged.update(vid for vid in r.sumo.edge.getLastStepVehicleIDs(edge) if "_ramp." in vid)
+            # The acceleration lane (hw_merge_0) is 250 m long.
+            standing.extend((t, vid) for vid in r.sumo.lane.getLastStepVehicleIDs("hw_merge_0") if v.getLanePosition(vid) > 200.0 and v.getSpeed(vid) < 0.5)
 
     run.step_hooks.append(watch)
     result = run.run()
     assert result.summary["background_vehicles"] == 0
     assert result.summary["courtesy_steps"] > 0
     assert len(merged) >= 25, len(merged)
+    assert result.summary["merge_lead_steps"] > 0
+    assert not standing, f"standing at the end of the acceleration lane: {standing[:3]}"
     assert result.summary["collisions"] == 0 and _collisions(tmp_path) == []
 
 

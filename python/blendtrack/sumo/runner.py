@@ -369,10 +369,13 @@ class SumoRun:
         self._lane_change_due: list[tuple[str, int, float, float]] = []
         #: This step's courtesy leaders: follower id -> (lane changer id, gap m).
         self._courtesy: dict[str, tuple[str, float]] = {}
+        #: This step's target-lane leaders of vehicles waiting to change lanes:
+        #: vehicle id -> (leader id, gap m).
+        self._merge_leads: dict[str, tuple[str, float]] = {}
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0, "inside_junction_waits": 0, "courtesy_steps": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0, "inside_junction_waits": 0, "courtesy_steps": 0, "merge_lead_steps": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         #: Moves by kind (see RouteFleet): speed only, nothing to send,
         #: (lane, position), (x, y, angle).
@@ -790,6 +793,7 @@ class SumoRun:
             "lane_changes_aborted": self.counts["lane_changes_aborted"],
             "inside_junction_waits": self.counts["inside_junction_waits"],
             "courtesy_steps": self.counts["courtesy_steps"],
+            "merge_lead_steps": self.counts["merge_lead_steps"],
         }
         samples = self.fleet.take_samples()
         return RunResult(self.records, summary, self._trajectories, samples)
@@ -916,7 +920,7 @@ class SumoRun:
                     asked.append(i)
                     leaders.append(self._get_leader(act.vid, LEADER_RANGE_M))
             self._changing_leaders(leaders, pos)
-        if self._courtesy:
+        if self._courtesy or self._merge_leads:
             assert asked is not None
             self._courtesy_leaders(leaders, {i: k for k, i in enumerate(asked)}, asked)
         return (asked, leaders), [i for i, _ in read], lanes, poss
@@ -956,7 +960,7 @@ class SumoRun:
         lanes = [lane_id(r.get(tc.VAR_LANE_ID, "")) for r in rows]
         poss = [float(r.get(tc.VAR_LANEPOSITION, math.nan)) for r in rows]
         self._changing_leaders(leaders, None)
-        if self._courtesy:
+        if self._courtesy or self._merge_leads:
             self._courtesy_leaders(leaders, None, None)
         return (None, leaders), list(range(len(rows))), lanes, poss
 
@@ -1128,7 +1132,7 @@ class SumoRun:
         direction = 1 if target > current else -1
         target_lane = f"{edge}_{target}"
         if not _could_change_lane(self._lane_change_state, act.vid, direction):
-            self._ask_courtesy(act.vid, target_lane, pos, speed)
+            self._wait_for_gap(act.vid, direction, target_lane, pos, speed)
             return
         lane_length = float(self._net_geometry().getLane(lane_id).getLength())
         length = min(max(2.0 * abs(speed), 10.0), 30.0, lane_length - pos - 1.0)
@@ -1140,13 +1144,32 @@ class SumoRun:
         # (its duration, at the present speed or 1 m/s, times the closing
         # speed) plus a margin.
         if not self._target_lane_clear(act.vid, direction, speed, length / max(abs(speed), 1.0)):
-            self._ask_courtesy(act.vid, target_lane, pos, speed)
+            self._wait_for_gap(act.vid, direction, target_lane, pos, speed)
             return
         geo2, track = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
         self.fleet.retrack(act.slot, track)
         act.geo = geo2
         self._set_changing(act, (direction, target))
         act.record.lane_changes += 1
+
+    def _wait_for_gap(self, vid: str, direction: int, target_lane: str, pos: float, speed: float) -> None:
+        """``vid`` has a lane change due and no room yet: it keeps behind the
+        target lane's nearest vehicle ahead as well as its own leader, so it
+        matches the target lane's speed and lines up behind that vehicle, and
+        it falls back behind a vehicle alongside (taken as a leader at gap 0:
+        the stopping law then keeps it a little slower) rather than drive
+        level with it down the lane; the follower there is asked for
+        courtesy."""
+        v = self.sumo.vehicle
+        side = 1 if direction < 0 else 0
+        near = [(nid, max(gap, 0.0)) for nid, gap in v.getNeighbors(vid, 2 | side)]
+        near += [(nid, 0.0) for nid, gap in v.getNeighbors(vid, side) if gap < 0.0]
+        lead = None
+        for cand in near:
+            lead = self._tighter_leader(lead, cand)
+        if lead is not None:
+            self._merge_leads[vid] = lead
+        self._ask_courtesy(vid, target_lane, pos, speed)
 
     def _ask_courtesy(self, vid: str, target_lane: str, pos: float, speed: float) -> None:
         """``vid`` waits to change onto ``target_lane`` with its front at
@@ -1183,9 +1206,11 @@ class SumoRun:
         own leader (``leaders`` and ``pos`` as in ``_changing_leaders``; a
         follower not yet asked is added to ``asked``)."""
         index = self._index
-        for fid, (cid, gap) in self._courtesy.items():
+        extra = [(fid, cid, gap, True) for fid, (cid, gap) in self._courtesy.items()]
+        extra += [(vid, nid, gap, False) for vid, (nid, gap) in self._merge_leads.items()]
+        for fid, cid, gap, courtesy in extra:
             i = index.get(fid)
-            if i is None or cid not in index:
+            if i is None or (courtesy and cid not in index):
                 continue
             if pos is None:
                 k = i
@@ -1199,8 +1224,9 @@ class SumoRun:
             lead = self._tighter_leader(leaders[k], (cid, gap))
             if lead[0] == cid:
                 leaders[k] = lead
-                self.counts["courtesy_steps"] += 1
+                self.counts["courtesy_steps" if courtesy else "merge_lead_steps"] += 1
         self._courtesy = {}
+        self._merge_leads = {}
 
     def _tighter_leader(self, a: Any, b: tuple[str, float]) -> Any:
         """Of two leaders (SUMO's ``(id, gap)``; ``a`` may be None or empty),
