@@ -922,7 +922,7 @@ class SumoRun:
             self._changing_leaders(leaders, pos)
         if self._courtesy or self._merge_leads:
             assert asked is not None
-            self._courtesy_leaders(leaders, {i: k for k, i in enumerate(asked)}, asked)
+            self._extra_leaders(leaders, {i: k for k, i in enumerate(asked)}, asked)
         return (asked, leaders), [i for i, _ in read], lanes, poss
 
     def _leaders(self) -> tuple[list[int] | None, list[Any]]:
@@ -961,7 +961,7 @@ class SumoRun:
         poss = [float(r.get(tc.VAR_LANEPOSITION, math.nan)) for r in rows]
         self._changing_leaders(leaders, None)
         if self._courtesy or self._merge_leads:
-            self._courtesy_leaders(leaders, None, None)
+            self._extra_leaders(leaders, None, None)
         return (None, leaders), list(range(len(rows))), lanes, poss
 
     def _changing_leaders(self, leaders: list[Any], pos: dict[int, int] | None) -> None:
@@ -1200,11 +1200,12 @@ class SumoRun:
                     self._courtesy[fid] = (vid, gap)
                 return
 
-    def _courtesy_leaders(self, leaders: list[Any], pos: dict[int, int] | None, asked: list[int] | None) -> None:
-        """Each courtesy follower's leader becomes the lane changer it gives
-        way to, where the stopping law brakes harder for that than for its
-        own leader (``leaders`` and ``pos`` as in ``_changing_leaders``; a
-        follower not yet asked is added to ``asked``)."""
+    def _extra_leaders(self, leaders: list[Any], pos: dict[int, int] | None, asked: list[int] | None) -> None:
+        """This step's extra leaders: a courtesy follower's is the lane
+        changer it gives way to, a waiting changer's the vehicle it lines up
+        behind. Each replaces the vehicle's own leader where the stopping law
+        brakes harder for it (``leaders`` and ``pos`` as in
+        ``_changing_leaders``; a vehicle not yet asked is added to ``asked``)."""
         index = self._index
         extra = [(fid, cid, gap, True) for fid, (cid, gap) in self._courtesy.items()]
         extra += [(vid, nid, gap, False) for vid, (nid, gap) in self._merge_leads.items()]
