@@ -609,6 +609,8 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
         (lambda tmp: ["sumo", "run", "rural_loop", "--controlled-fraction", "1.5", "--out", str(tmp / "o")], "fraction"),
         (lambda tmp: ["sumo", "run", "rural_loop", "--alpha", "-0.2", "--out", str(tmp / "o")], "alpha"),
         (lambda tmp: ["sumo", "run", "rural_loop", "--border-margin", "-1", "--out", str(tmp / "o")], "border margin"),
+        (lambda tmp: ["sumo", "run", "rural_loop", "--sumo-args", "--no-such-option 1", "--out", str(tmp / "o")], "no-such-option"),
+        (lambda tmp: ["sumo", "run", "rural_loop", "--sumo-args", "'--scale 2", "--out", str(tmp / "o")], "sumo-args"),
     ],
 )
 def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, make_args, expect: str) -> None:  # type: ignore[no-untyped-def]
@@ -617,6 +619,18 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, make_args, expect: str
     lines = proc.stderr.strip().splitlines()
     assert len(lines) == 1 and expect in lines[0], proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_sumo_args_reach_sumo(tmp_path: Path) -> None:
+    """--sumo-args passes options to SUMO itself: --scale 0.5 halves the demand."""
+    counts = []
+    for name, extra in (("full", []), ("half", ["--sumo-args", "--scale 0.5"])):
+        proc = _cli("sumo", "run", "rural_loop", "--end", "200", "--quiet", *extra, "--out", str(tmp_path / name))
+        assert proc.returncode == 0, proc.stderr
+        s = json.loads((tmp_path / name / "summary.json").read_text())
+        counts.append(s["controlled_vehicles"] + s["background_vehicles"])
+    full, half = counts
+    assert full >= 20 and 0.3 * full <= half <= 0.7 * full, counts
 
 
 def test_net_sumo_rejects_is_one_line_and_exit_2(tmp_path: Path) -> None:

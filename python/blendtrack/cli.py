@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shlex
 import signal
 import sys
 from collections.abc import Sequence
@@ -42,6 +43,14 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
+
+
+def _sumo_args(text: str) -> tuple[str, ...]:
+    """``--sumo-args``: the options split as a shell would."""
+    try:
+        return tuple(shlex.split(text))
+    except ValueError as e:
+        raise argparse.ArgumentTypeError(f"--sumo-args {text!r}: {e}") from None
 
 
 def _require_file(name: str, kind: str, error: type[Exception]) -> None:
@@ -289,6 +298,7 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         trace=args.trace,
         fcd=args.fcd,
         ssm=args.ssm,
+        sumo_args=args.sumo_args,
         progress=not args.quiet,
     )
     out = FsPath(args.out)
@@ -563,6 +573,14 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
     run.add_argument("--trace", action="store_true", help="also write OUT/trace.csv, one row per controlled vehicle and step")
     run.add_argument("--fcd", action="store_true", help="also write SUMO's floating car data to OUT/sumo/fcd.xml")
     run.add_argument("--ssm", action="store_true", help="also write SUMO's SSM conflicts (TTC, DRAC, PET) to OUT/sumo/ssm.xml")
+    run.add_argument(
+        "--sumo-args",
+        type=_sumo_args,
+        default=(),
+        metavar="'OPTS'",
+        help="extra options for SUMO itself, one quoted string, e.g. --sumo-args '--scale 2' (demand x2); "
+        "an option SUMO does not know is a one-line error",
+    )
     run.add_argument("--quiet", action="store_true", help="no progress bar")
     run.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
     run.set_defaults(run=_cmd_sumo_run)

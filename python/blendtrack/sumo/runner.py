@@ -154,13 +154,14 @@ def _cache_dir() -> Path:
     return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "blendtrack"
 
 
-def loads_ok_marker(scenario: Scenario, binary: str) -> Path | None:
+def loads_ok_marker(scenario: Scenario, binary: str, sumo_args: tuple[str, ...] = ()) -> Path | None:
     """Where the runner notes that SUMO loaded ``scenario`` without error: a
     file named by a hash of the SUMO binary (path, size, modification time),
     the .sumocfg and every file its ``<input>`` names (the network, routes,
-    additional files), under ``$BLENDTRACK_CACHE_DIR`` (default
-    ``~/.cache/blendtrack``). Any change to them is another name, so the
-    child check runs again. None when a file cannot be read (no caching)."""
+    additional files) and the extra SUMO options, under
+    ``$BLENDTRACK_CACHE_DIR`` (default ``~/.cache/blendtrack``). Any change to
+    them is another name, so the child check runs again. None when a file
+    cannot be read (no caching)."""
     import xml.etree.ElementTree as ET
 
     try:
@@ -169,6 +170,7 @@ def loads_ok_marker(scenario: Scenario, binary: str) -> Path | None:
         h.update(f"{os.path.realpath(binary)}:{st.st_size}:{st.st_mtime_ns}\n".encode())
         cfg = scenario.sumocfg
         h.update(cfg.read_bytes())
+        h.update(("\n".join(sumo_args) + "\n").encode())
         files = {scenario.net_file, *scenario.route_files}
         inputs = ET.parse(cfg).getroot().find("input")
         for opt in inputs if inputs is not None else ():
@@ -514,10 +516,12 @@ class SumoRun:
         import subprocess
 
         binary = sumo_binary(False)
-        marker = loads_ok_marker(self.scenario, binary)
+        marker = loads_ok_marker(self.scenario, binary, tuple(self.opt.sumo_args))
         if marker is not None and marker.exists():
             return
-        cmd = [binary, "-c", str(self.scenario.sumocfg), "--end", "0", "--no-step-log", "true",
+        # The user's extra options go first: the check's own --end 0 and
+        # quiet flags win over theirs.
+        cmd = [binary, "-c", str(self.scenario.sumocfg), *self.opt.sumo_args, "--end", "0", "--no-step-log", "true",
                "--duration-log.disable", "true", "--no-warnings", "true"]
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
