@@ -621,6 +621,17 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, make_args, expect: str
     assert "Traceback" not in proc.stderr
 
 
+def test_extra_sumo_options_replace_the_runners_own() -> None:
+    """SUMO refuses an option given twice, so one the user passes replaces
+    the runner's (with its values; negative numbers are values, not options)."""
+    from blendtrack.sumo.runner import _override_options
+
+    assert _override_options(["--no-step-log", "true", "--end", "0"], ["--no-warnings", "true", "--end", "5"]) == [
+        "--no-step-log", "true", "--no-warnings", "true", "--end", "5"]
+    assert _override_options(["--begin", "-5", "--no-warnings"], ["--scale", "2"]) == ["--begin", "-5", "--no-warnings", "--scale", "2"]
+    assert _override_options(["--seed", "0", "--end", "9"], ["--seed=3"]) == ["--end", "9", "--seed=3"]
+
+
 def test_sumo_args_reach_sumo(tmp_path: Path) -> None:
     """--sumo-args passes options to SUMO itself: --scale 0.5 halves the demand."""
     counts = []

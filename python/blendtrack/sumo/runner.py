@@ -410,8 +410,8 @@ class SumoRun:
                 ]
         if self.opt.end_s is not None:
             cmd += ["--end", str(self.opt.end_s)]
-        cmd += list(self.opt.sumo_args)
-        return cmd
+        # SUMO refuses an option given twice: the user's replace ours.
+        return cmd[:3] + _override_options(cmd[3:], list(self.opt.sumo_args))
 
     def start(self) -> None:
         global _LIBSUMO_STARTED
@@ -519,10 +519,11 @@ class SumoRun:
         marker = loads_ok_marker(self.scenario, binary, tuple(self.opt.sumo_args))
         if marker is not None and marker.exists():
             return
-        # The user's extra options go first: the check's own --end 0 and
-        # quiet flags win over theirs.
-        cmd = [binary, "-c", str(self.scenario.sumocfg), *self.opt.sumo_args, "--end", "0", "--no-step-log", "true",
-               "--duration-log.disable", "true", "--no-warnings", "true"]
+        # SUMO refuses an option given twice: the user's extra options replace
+        # the check's quiet flags, and the check's --end 0 replaces theirs.
+        quiet = ["--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
+        opts = _override_options(_override_options(quiet, list(self.opt.sumo_args)), ["--end", "0"])
+        cmd = [binary, "-c", str(self.scenario.sumocfg), *opts]
         try:
             proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
         except (OSError, subprocess.TimeoutExpired) as e:
@@ -1562,6 +1563,34 @@ def _segments_distance(p: np.ndarray, q: np.ndarray) -> float:
         return np.hypot(*np.moveaxis(s0 + t[..., None] * e - pt, -1, 0))
 
     return float(min(point_seg(a, c, d).min(), point_seg(b, c, d).min(), point_seg(c, a, b).min(), point_seg(d, a, b).min()))
+
+
+def _override_options(base: list[str], extra: list[str]) -> list[str]:
+    """SUMO command-line options ``base`` with ``extra`` added, an option in
+    both taken from ``extra`` only (SUMO refuses one given twice). An option
+    is a token starting with ``-`` and the tokens after it up to the next
+    such token (its values; none for a bare flag)."""
+
+    def names(args: list[str]) -> set[str]:
+        return {a.split("=", 1)[0].lstrip("-") for a in args if a.startswith("-") and not _is_number(a)}
+
+    given = names(extra)
+    kept: list[str] = []
+    skipping = False
+    for a in base:
+        if a.startswith("-") and not _is_number(a):
+            skipping = a.split("=", 1)[0].lstrip("-") in given
+        if not skipping:
+            kept.append(a)
+    return kept + extra
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
 
 
 def _could_change_lane(lane_change_state: Callable[[str, int], Any], vid: str, direction: int) -> bool:
