@@ -44,7 +44,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see '{self.prog} --help')\n")
 
 
-
 def _sumo_args(text: str) -> tuple[str, ...]:
     """``--sumo-args``: the options split as a shell would."""
     try:
@@ -60,6 +59,7 @@ def _require_file(name: str, kind: str, error: type[Exception]) -> None:
     problem = file_problem(name)
     if problem:
         raise error(f"cannot read {kind} file {name}: {problem}")
+
 
 def _cmd_version(args: argparse.Namespace) -> int:
     print(blendtrack.__version__)

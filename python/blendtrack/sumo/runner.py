@@ -915,20 +915,27 @@ class SumoRun:
         read = [(i, vid) for vid in self._read_position if (i := index.get(vid)) is not None]
         lanes = [lane_id(get_lane(vid)) for _, vid in read]
         poss = [get_pos(vid) for _, vid in read]
-        if self._changing:
-            # The lane changers' leaders need SUMO's word (and a look at the target lane).
-            pos = {i: k for k, i in enumerate(asked)}
-            for act in self._changing.values():
-                i = index[act.vid]
-                if i not in pos:
-                    pos[i] = len(asked)
-                    asked.append(i)
-                    leaders.append(self._get_leader(act.vid, LEADER_RANGE_M))
-            self._changing_leaders(leaders, pos)
-        if self._courtesy or self._merge_leads:
+        if self._changing or self._courtesy or self._merge_leads:
             assert asked is not None
-            self._extra_leaders(leaders, {i: k for k, i in enumerate(asked)}, asked)
+            pos = {i: k for k, i in enumerate(asked)}
+            if self._changing:
+                # The lane changers' leaders need SUMO's word (and a look at the target lane).
+                for act in self._changing.values():
+                    self._ask_leader(index[act.vid], pos, asked, leaders)
+                self._changing_leaders(leaders, pos)
+            if self._courtesy or self._merge_leads:
+                self._extra_leaders(leaders, pos, asked)
         return (asked, leaders), [i for i, _ in read], lanes, poss
+
+    def _ask_leader(self, i: int, pos: dict[int, int], asked: list[int], leaders: list[Any]) -> int:
+        """Where the leader of the vehicle at index ``i`` is in ``leaders``;
+        one not asked yet is asked of SUMO now and added (to ``asked`` too)."""
+        k = pos.get(i)
+        if k is None:
+            k = pos[i] = len(asked)
+            asked.append(i)
+            leaders.append(self._get_leader(self._ids[i], LEADER_RANGE_M))
+        return k
 
     def _leaders(self) -> tuple[list[int] | None, list[Any]]:
         """Every controlled vehicle's leader as ``vehicle.getLeader`` gives it:
@@ -1220,13 +1227,9 @@ class SumoRun:
                 continue
             if pos is None:
                 k = i
-            elif i in pos:
-                k = pos[i]
             else:
                 assert asked is not None
-                k = pos[i] = len(asked)
-                asked.append(i)
-                leaders.append(self._get_leader(fid, LEADER_RANGE_M))
+                k = self._ask_leader(i, pos, asked, leaders)
             lead = self._tighter_leader(leaders[k], (cid, gap))
             if lead[0] == cid:
                 leaders[k] = lead
@@ -1571,26 +1574,28 @@ def _override_options(base: list[str], extra: list[str]) -> list[str]:
     is a token starting with ``-`` and the tokens after it up to the next
     such token (its values; none for a bare flag)."""
 
-    def names(args: list[str]) -> set[str]:
-        return {a.split("=", 1)[0].lstrip("-") for a in args if a.startswith("-") and not _is_number(a)}
-
-    given = names(extra)
+    given = {name for a in extra if (name := _option_name(a)) is not None}
     kept: list[str] = []
     skipping = False
     for a in base:
-        if a.startswith("-") and not _is_number(a):
-            skipping = a.split("=", 1)[0].lstrip("-") in given
+        name = _option_name(a)
+        if name is not None:
+            skipping = name in given
         if not skipping:
             kept.append(a)
     return kept + extra
 
 
-def _is_number(text: str) -> bool:
+def _option_name(token: str) -> str | None:
+    """The option a command-line token names (``--end=5`` -> ``end``), or
+    None for a value (a negative number is a value)."""
+    if not token.startswith("-"):
+        return None
     try:
-        float(text)
+        float(token)
+        return None
     except ValueError:
-        return False
-    return True
+        return token.split("=", 1)[0].lstrip("-")
 
 
 def _could_change_lane(lane_change_state: Callable[[str, int], Any], vid: str, direction: int) -> bool:
