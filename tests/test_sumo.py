@@ -298,6 +298,54 @@ def test_lane_change_is_given_up_when_the_room_goes(tmp_path: Path) -> None:
     assert result.summary["collisions"] == 0 and _collisions(tmp_path) == []
 
 
+def test_a_lane_change_the_route_does_not_need_ends_on_the_chosen_lane() -> None:
+    """route_geometry with change=(start, length, lane): the track leaves the
+    first edge's lane at start, is on the chosen lane from start + length on
+    and stays on that lane's continuation; a lane the edge lacks, or one that
+    does not go on along the route, is a PathError naming it."""
+    import sumolib
+
+    from blendtrack.sumo.geometry import route_geometry
+
+    net = sumolib.net.readNet(str(SCENARIOS / "highway_onramp" / "highway_onramp.net.xml"), withInternal=True)
+    edges = ("hw_in", "hw_up", "hw_merge")
+    g = route_geometry(net, edges, 0, change=(100.0, 20.0, 1))
+    first = [(lane, s) for lane, s in zip(g.piece_lane, g.piece_start_s) if lane.startswith("hw_in_")]
+    assert first[0][0] == "hw_in_0" and {lane for lane, _ in first[1:]} == {"hw_in_1"}
+    assert 99.0 < first[1][1] < 102.0 and 119.0 < first[-1][1] < 122.0
+    assert [x for x in g.piece_lane if x.startswith("hw_up")] == ["hw_up_1"]
+    assert g.pending_change is None
+    plain = route_geometry(net, edges, 0)
+    assert [x for x in plain.piece_lane if x.startswith("hw_up")] == ["hw_up_0"]
+    with pytest.raises(blendtrack.PathError, match="has no lane 5"):
+        route_geometry(net, edges, 0, change=(100.0, 20.0, 5))
+    with pytest.raises(blendtrack.PathError, match="has no lane 0 to change to from lane 0"):
+        route_geometry(net, edges, 0, change=(100.0, 20.0, 0))
+
+
+def test_tactical_lane_changes_are_made_on_request_without_collision(tmp_path: Path) -> None:
+    """--tactical-lane-changes: where SUMO's lane-change model wants a change
+    the route does not need (speed gain, keep right) and the target lane has
+    room, the controlled vehicle makes it. Highway at its own demand, every
+    vehicle controlled: changes happen, nobody collides, and they are off by
+    default."""
+    r = subprocess.run(
+        [sys.executable, "-m", "blendtrack.cli", "sumo", "run", "highway_onramp", "--controlled-fraction", "1", "--end", "200",
+         "--tactical-lane-changes", "--quiet", "--out", str(tmp_path / "on")],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert r.returncode == 0, r.stderr
+    on = json.loads((tmp_path / "on" / "summary.json").read_text())
+    assert on["tactical_lane_changes_enabled"] is True
+    assert on["tactical_lane_changes"] >= 10, on["tactical_lane_changes"]
+    changes = sum(int(row["lane_changes"]) for row in _read_vehicles(tmp_path / "on"))
+    assert changes >= on["tactical_lane_changes"], changes
+    assert on["collisions"] == 0 and _collisions(tmp_path / "on") == []
+    sc = sumo.resolve_scenario("highway_onramp")
+    off = sumo.run_scenario(sc, RunOptions(controlled_fraction=1.0, end_s=60, progress=False), tmp_path / "off")
+    assert off.summary["tactical_lane_changes_enabled"] is False and off.summary["tactical_lane_changes"] == 0
+
+
 def test_sumo_has_each_controlled_vehicle_where_blendtrack_has_it(tmp_path: Path) -> None:
     """Most controlled vehicles only get a speed and SUMO's own movement puts
     them in place: after every SUMO step, SUMO's front bumper of each

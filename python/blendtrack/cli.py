@@ -291,6 +291,7 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         fixed_keys=frozenset(keys),
         border_margin_m=args.border_margin,
         stop_at_route_end=args.stop_at_route_end,
+        tactical_lane_changes=args.tactical_lane_changes,
         end_s=args.end,
         seed=args.seed,
         backend="traci" if args.gui else args.backend,
@@ -328,6 +329,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         fixed_keys=frozenset(keys),
         border_margin_m=args.border_margin,
         stop_at_route_end=args.stop_at_route_end,
+        tactical_lane_changes=args.tactical_lane_changes,
     )
     opts = compare.CompareOptions(
         baseline=args.baseline,
@@ -366,6 +368,12 @@ def _add_driving_options(parser: argparse.ArgumentParser) -> None:
         "--stop-at-route-end",
         action="store_true",
         help="controlled vehicles stop at the end of their route (default: they leave at speed, as SUMO's drivers do)",
+    )
+    parser.add_argument(
+        "--tactical-lane-changes",
+        action="store_true",
+        help="controlled vehicles also change lanes where their route does not need it, when SUMO's lane-change model "
+        "would (to overtake, keep right, make room) and the target lane has room (default: only the changes the route needs)",
     )
 
 

@@ -133,6 +133,7 @@ def _run_options(task: dict[str, Any]) -> Any:
         max_controlled=p.get("max_controlled"),
         border_margin_m=p.get("border_margin_m", 0.0),
         stop_at_route_end=p.get("stop_at_route_end", False),
+        tactical_lane_changes=p.get("tactical_lane_changes", False),
         config=config,
         vehicle=vehicle,
         fixed_keys=frozenset(keys),

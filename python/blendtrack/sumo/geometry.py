@@ -214,7 +214,7 @@ def _pieces(
     start_index: int,
     spacing_m: float,
     defer_changes: bool = False,
-    change: tuple[float, float] | None = None,
+    change: tuple[float, float] | tuple[float, float, int] | None = None,
 ) -> tuple[list[_Piece], tuple[int, int] | None]:
     """Lane pieces along the route: normal lanes, junction lanes, and lane
     changes within an edge where the current lane does not continue.
@@ -224,7 +224,9 @@ def _pieces(
     pieces stop at the end of the lane that does not continue and the second
     value says where the change is due: (edge index, target lane index); the
     caller rebuilds once the change can be made. Without it the change spans
-    the whole edge.
+    the whole edge. ``change`` = (start, length, target lane index) is a
+    change the route does not need (to overtake, to keep right): onto that
+    lane of the first edge, which must go on along the route.
     """
     objs = []
     for eid in edges:
@@ -251,12 +253,28 @@ def _pieces(
 
     out: list[_Piece] = []
     lane = objs[0].getLane(min(max(start_index, 0), objs[0].getLaneNumber() - 1))
+    # A change the route does not need: the pieces of the first edge are the change's.
+    chosen = change is not None and len(change) == 3
+    if chosen:
+        assert change is not None and len(change) == 3
+        target_index = change[2]
+        if not 0 <= target_index < objs[0].getLaneNumber() or target_index == lane.getIndex():
+            raise PathError(f"edge {edges[0]!r} has no lane {target_index} to change to from lane {lane.getIndex()}")
+        goal = objs[0].getLane(target_index)
+        if len(objs) > 1 and not conns_to(goal, 1):
+            raise PathError(f"lane {goal.getID()!r} does not go on to edge {edges[1]!r}")
+        out.extend(_lane_change_pieces(lane, goal, spacing_m, change[0], change[1]))
+        lane = goal
     for k in range(len(objs)):
+        first_done = chosen and k == 0
         if k + 1 == len(objs):
-            out.append(piece(lane))
+            if not first_done:
+                out.append(piece(lane))
             break
         cs = conns_to(lane, k + 1)
-        if not cs:
+        if first_done:
+            pass
+        elif not cs:
             # Change to the nearest lane of this edge that continues.
             able = [ln for ln in objs[k].getLanes() if conns_to(ln, k + 1)]
             if not able:
@@ -329,7 +347,7 @@ def route_geometry(
     spacing_m: float = 1.0,
     smoothing_m: float = 1.5,
     defer_changes: bool = False,
-    change: tuple[float, float] | None = None,
+    change: tuple[float, float] | tuple[float, float, int] | None = None,
     border_margin_m: float = 0.0,
 ) -> RouteGeometry:
     """Builds the reference track of a vehicle on ``edges`` starting in lane ``start_lane_index``.

@@ -84,6 +84,25 @@ ABORT_CHANGE_LAT_M = 0.5
 # cooperative speed adaptation), but not for vehicles blendtrack drives.
 COURTESY_DECEL_MPS2 = 2.0
 COURTESY_RANGE_M = 150.0
+# Lane changes the route does not need: every TACTICAL_CHECK_EVERY steps
+# (staggered over the vehicles) SUMO's lane-change model (LC2013, whose state
+# it keeps for every vehicle, controlled or not) is asked whether a controlled
+# vehicle would change to gain speed, to keep right or to make room for a
+# merger; where it would, has room by SUMO's and blendtrack's checks and drives
+# at TACTICAL_MIN_SPEED_MPS or more, blendtrack makes the change (as it does
+# the ones the route needs). Without them controlled vehicles keep their lane
+# for good: at a merge the mainline never moves over, the ramp's traffic all
+# lands on the right lane, and it jams.
+TACTICAL_CHECK_EVERY = 10
+TACTICAL_MIN_SPEED_MPS = 3.0
+# Such a change also needs, to the target lane's follower and leader, a gap of
+# LANE_CHANGE_GAP_M plus TACTICAL_HEADWAY_S of the rear one's speed plus what
+# it takes the rear one to come down to the front one's speed braking at
+# TACTICAL_DECEL_MPS2: nobody brakes hard for a change that is only wanted
+# (SUMO's "not blocked" is by its own drivers' measure, and lets a changer cut
+# in closer than blendtrack's stopping law keeps).
+TACTICAL_HEADWAY_S = 1.0
+TACTICAL_DECEL_MPS2 = 1.0
 # How far before a junction without priority a vehicle asks SUMO whether foes approach (m).
 YIELD_LOOKAHEAD_M = 30.0
 # A controlled vehicle's route id is compared with SUMO's every this many steps
@@ -236,6 +255,11 @@ class RunOptions:
     #: controlled vehicles, like SUMO's drivers (``arrivalSpeed="current"``),
     #: leave the network at their route's end without slowing down.
     stop_at_route_end: bool = False
+    #: Let controlled vehicles change lanes where their route does not need
+    #: it, when SUMO's lane-change model would (to overtake, keep right or
+    #: make room): see ``TACTICAL_CHECK_EVERY``. Off by default: only the
+    #: changes the route needs (see the README for what it does to a merge).
+    tactical_lane_changes: bool = False
 
     def __post_init__(self) -> None:
         m = self.border_margin_m
@@ -377,7 +401,7 @@ class SumoRun:
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0, "inside_junction_waits": 0, "courtesy_steps": 0, "merge_lead_steps": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "lane_changes_aborted": 0, "inside_junction_waits": 0, "courtesy_steps": 0, "merge_lead_steps": 0, "tactical_lane_changes": 0}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         #: Moves by kind (see RouteFleet): speed only, nothing to send,
         #: (lane, position), (x, y, angle).
@@ -629,7 +653,7 @@ class SumoRun:
         return self._net
 
     def _geometry(
-        self, edges: tuple[str, ...], lane_index: int, change: tuple[float, float] | None = None
+        self, edges: tuple[str, ...], lane_index: int, change: tuple[float, float] | tuple[float, float, int] | None = None
     ) -> tuple[RouteGeometry, int]:
         """The track of a route from a lane, registered with its lane pieces and
         stop lines; shared by every vehicle on the same route and lane (a track
@@ -790,6 +814,7 @@ class SumoRun:
             "comfort_lateral_accel_mps2": self.scenario.comfort_lateral_accel_mps2,
             "border_margin_m": self.opt.border_margin_m,
             "stop_at_route_end": self.opt.stop_at_route_end,
+            "tactical_lane_changes_enabled": self.opt.tactical_lane_changes,
             "moves_speed_only": self.moves["speed"],
             "moves_none": self.moves["none"],
             "moves_lane_position": self.moves["lane"],
@@ -799,6 +824,7 @@ class SumoRun:
             "inside_junction_waits": self.counts["inside_junction_waits"],
             "courtesy_steps": self.counts["courtesy_steps"],
             "merge_lead_steps": self.counts["merge_lead_steps"],
+            "tactical_lane_changes": self.counts["tactical_lane_changes"],
         }
         samples = self.fleet.take_samples()
         return RunResult(self.records, summary, self._trajectories, samples)
@@ -1026,6 +1052,8 @@ class SumoRun:
             if act is not None:
                 self._try_lane_change(act, self._lanes.name(lane), pos, speed)
         self._lane_change_due = []
+        if self.opt.tactical_lane_changes and self._order:
+            self._tactical_changes()
         if self._has_tls:
             self._refresh_tls()
         leaders, read, lanes, poss = self._observe(t)
@@ -1163,6 +1191,99 @@ class SumoRun:
         act.geo = geo2
         self._set_changing(act, (direction, target))
         act.record.lane_changes += 1
+
+    def _tactical_changes(self) -> None:
+        """This step's share of the controlled vehicles (every
+        ``TACTICAL_CHECK_EVERY``-th) change lanes where SUMO's lane-change
+        model wants a change the route does not need and has room for it."""
+        import traci.constants as tc
+
+        state = self._lane_change_state
+        reasons = tc.LCA_SPEEDGAIN | tc.LCA_KEEPRIGHT | tc.LCA_COOPERATIVE
+        for act in self._order[self._steps % TACTICAL_CHECK_EVERY :: TACTICAL_CHECK_EVERY]:
+            if act.changing is not None or self.active.get(act.vid) is not act:
+                continue
+            for direction in (1, -1):
+                try:
+                    wants, _ = state(act.vid, direction)
+                except Exception:
+                    break  # gone without an event: _observe drops it
+                side = tc.LCA_LEFT if direction > 0 else tc.LCA_RIGHT
+                if wants & side and wants & reasons and not wants & (tc.LCA_BLOCKED | tc.LCA_STRATEGIC):
+                    self._try_tactical_change(act, direction)
+                    break
+
+    def _try_tactical_change(self, act: _Active, direction: int) -> None:
+        """Changes ``act`` one lane over (+1 left, -1 right) on its edge, if
+        the target lane goes on along the route and has room now."""
+        v = self.sumo.vehicle
+        try:
+            lane_id = v.getLaneID(act.vid)
+            speed = float(v.getSpeed(act.vid))
+            pos = float(v.getLanePosition(act.vid))
+            rest = tuple(v.getRoute(act.vid))[max(int(v.getRouteIndex(act.vid)), 0) :]
+        except Exception:
+            return
+        geo = act.geo
+        edge, _, index = lane_id.rpartition("_")
+        if speed < TACTICAL_MIN_SPEED_MPS or lane_id.startswith(":") or not index.isdigit():
+            return
+        k = len(geo.edges) - len(rest)
+        if not rest or k < 0 or geo.edges[k:] != rest or rest[0] != edge:
+            return  # the track is not of the route from here (a rebuild is due)
+        if geo.pending_change is not None and geo.pending_change[0] == k:
+            return  # the route needs a change on this edge: that one first
+        current = int(index)
+        target = current + direction
+        lane = self._net_geometry().getLane(lane_id)
+        if not 0 <= target < lane.getEdge().getLaneNumber():
+            return
+        length = min(max(2.0 * speed, 10.0), 30.0, float(lane.getLength()) - pos - 1.0)
+        if length < 8.0 or not self._target_lane_clear(act.vid, direction, speed, length / speed):
+            return
+        if not self._tactical_room(act.vid, direction, speed) or self._changing_into(edge, target, act.vid):
+            return
+        try:
+            geo2, track = self._geometry(rest, current, change=(pos, length, target))
+        except blendtrack.PathError:
+            return  # the target lane does not go on along the route
+        self.fleet.retrack(act.slot, track)
+        act.geo = geo2
+        self._set_changing(act, (direction, target))
+        act.record.lane_changes += 1
+        self.counts["tactical_lane_changes"] += 1
+
+    def _changing_into(self, edge: str, target: int, vid: str) -> bool:
+        """Is another controlled vehicle changing onto lane ``target`` of
+        ``edge`` (from the other side, say)? Neither would see the other on
+        the target lane before SUMO puts it there."""
+        v = self.sumo.vehicle
+        for other in self._changing.values():
+            if other.vid != vid and other.changing is not None and other.changing[1] == target:
+                try:
+                    if v.getRoadID(other.vid) == edge:
+                        return True
+                except Exception:
+                    continue
+        return False
+
+    def _tactical_room(self, vid: str, direction: int, speed: float) -> bool:
+        """Gaps on the target lane for a change that is only wanted (see
+        ``TACTICAL_HEADWAY_S``)."""
+        v = self.sumo.vehicle
+        side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
+
+        def needed(rear: float, front: float) -> float:
+            rear, front = max(rear, 0.0), max(front, 0.0)
+            return LANE_CHANGE_GAP_M + TACTICAL_HEADWAY_S * rear + max(rear * rear - front * front, 0.0) / (2.0 * TACTICAL_DECEL_MPS2)
+
+        for nid, gap in v.getNeighbors(vid, side):
+            if gap < needed(float(v.getSpeed(nid)), speed):
+                return False
+        for nid, gap in v.getNeighbors(vid, side | 2):
+            if gap < needed(speed, float(v.getSpeed(nid))):
+                return False
+        return True
 
     def _wait_for_gap(self, vid: str, direction: int, target_lane: str, pos: float, speed: float) -> None:
         """``vid`` has a lane change due and no room yet: it keeps behind the
