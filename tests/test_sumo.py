@@ -346,6 +346,19 @@ def test_tactical_lane_changes_are_made_on_request_without_collision(tmp_path: P
     assert off.summary["tactical_lane_changes_enabled"] is False and off.summary["tactical_lane_changes"] == 0
 
 
+def test_tactical_lane_changes_watch_the_lane_beyond_the_target(tmp_path: Path) -> None:
+    """The scenario's own mix (its automated vehicles among SUMO's), 600 s,
+    tactical changes on: before the check of the lane beyond the target
+    lane (a SUMO driver there may move onto the target lane at the same
+    time) and the giving up of a change whose room goes, a SUMO driver at
+    33 m/s ran into a controlled vehicle changing onto the middle lane
+    (t = 479 s)."""
+    sc = sumo.resolve_scenario("highway_onramp")
+    res = sumo.run_scenario(sc, RunOptions(end_s=600, tactical_lane_changes=True, progress=False), tmp_path)
+    assert res.summary["tactical_lane_changes"] >= 20, res.summary["tactical_lane_changes"]
+    assert res.summary["collisions"] == 0 and _collisions(tmp_path) == []
+
+
 def test_sumo_has_each_controlled_vehicle_where_blendtrack_has_it(tmp_path: Path) -> None:
     """Most controlled vehicles only get a speed and SUMO's own movement puts
     them in place: after every SUMO step, SUMO's front bumper of each

@@ -103,6 +103,10 @@ TACTICAL_MIN_SPEED_MPS = 3.0
 # in closer than blendtrack's stopping law keeps).
 TACTICAL_HEADWAY_S = 1.0
 TACTICAL_DECEL_MPS2 = 1.0
+# Once started, such a change is given up (back to its lane) as soon as the
+# room falls below the same gaps at half the headway and twice the braking
+# (the margin keeps a change from being given up for a small speed change).
+TACTICAL_KEEP_FACTOR = 0.5
 # How far before a junction without priority a vehicle asks SUMO whether foes approach (m).
 YIELD_LOOKAHEAD_M = 30.0
 # A controlled vehicle's route id is compared with SUMO's every this many steps
@@ -311,6 +315,8 @@ class _Active:
     trajectory: list[tuple[float, float, float, float, float, float]] | None = None
     #: While a lane change is under way: (+1 left or -1 right, target lane index).
     changing: tuple[int, int] | None = None
+    #: The change under way is one the route does not need (checked every step, see _changing_leader).
+    tactical: bool = False
 
 
 @dataclass
@@ -1014,6 +1020,7 @@ class SumoRun:
     def _set_changing(self, act: _Active, changing: tuple[int, int] | None) -> None:
         act.changing = changing
         if changing is None:
+            act.tactical = False
             self._changing.pop(act.vid, None)
         else:
             self._changing[act.vid] = act
@@ -1027,7 +1034,14 @@ class SumoRun:
         if v.getLaneIndex(act.vid) == target:
             self._set_changing(act, None)
             return lead
-        if abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M:
+        if act.tactical:
+            # Until SUMO puts it on the target lane nobody there sees it, and
+            # a SUMO driver may move onto that lane from the far side: a
+            # change that is only wanted is given up whenever its room goes.
+            if not self._tactical_room(act.vid, direction, float(v.getSpeed(act.vid)), keep=True):
+                self._abort_change(act)
+                return lead
+        elif abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M:
             # Barely started (or held at its start by a leader): the room
             # checked when it began may be gone, e.g. a follower has come up
             # on the target lane while the vehicle stood. Check again.
@@ -1250,6 +1264,7 @@ class SumoRun:
         self.fleet.retrack(act.slot, track)
         act.geo = geo2
         self._set_changing(act, (direction, target))
+        act.tactical = True
         act.record.lane_changes += 1
         self.counts["tactical_lane_changes"] += 1
 
@@ -1267,22 +1282,52 @@ class SumoRun:
                     continue
         return False
 
-    def _tactical_room(self, vid: str, direction: int, speed: float) -> bool:
-        """Gaps on the target lane for a change that is only wanted (see
-        ``TACTICAL_HEADWAY_S``)."""
+    def _tactical_room(self, vid: str, direction: int, speed: float, keep: bool = False) -> bool:
+        """Gaps for a change that is only wanted (see ``TACTICAL_HEADWAY_S``)
+        on the target lane, and on the lane beyond it: a SUMO driver there
+        may move onto the target lane at the same time, and SUMO's drivers
+        see the changer only once SUMO has put it there (a collision of one
+        at 33 m/s, from 3.5 m behind, before this check). The lane beyond
+        is held to the smaller room (``TACTICAL_KEEP_FACTOR``) and only
+        before the change starts; ``keep``: the check of a change under way,
+        the target lane held to the smaller room."""
         v = self.sumo.vehicle
         side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
 
-        def needed(rear: float, front: float) -> float:
+        def needed(rear: float, front: float, f: float) -> float:
             rear, front = max(rear, 0.0), max(front, 0.0)
-            return LANE_CHANGE_GAP_M + TACTICAL_HEADWAY_S * rear + max(rear * rear - front * front, 0.0) / (2.0 * TACTICAL_DECEL_MPS2)
+            return LANE_CHANGE_GAP_M + f * (TACTICAL_HEADWAY_S * rear + max(rear * rear - front * front, 0.0) / (2.0 * TACTICAL_DECEL_MPS2))
 
+        f = TACTICAL_KEEP_FACTOR if keep else 1.0
         for nid, gap in v.getNeighbors(vid, side):
-            if gap < needed(float(v.getSpeed(nid)), speed):
+            if gap < needed(float(v.getSpeed(nid)), speed, f):
                 return False
         for nid, gap in v.getNeighbors(vid, side | 2):
-            if gap < needed(speed, float(v.getSpeed(nid))):
+            if gap < needed(speed, float(v.getSpeed(nid)), f):
                 return False
+        if keep:
+            return True
+        f = TACTICAL_KEEP_FACTOR
+        lane_id = v.getLaneID(vid)
+        edge, _, index = lane_id.rpartition("_")
+        if not index.isdigit():
+            return True
+        far = int(index) + 2 * direction
+        if not 0 <= far < self._net_geometry().getLane(lane_id).getEdge().getLaneNumber():
+            return True
+        front = float(v.getLanePosition(vid))
+        back = front - float(v.getLength(vid))
+        for other in self._vehicles_on(f"{edge}_{far}"):
+            o_front = float(v.getLanePosition(other))
+            o_speed = float(v.getSpeed(other))
+            if o_front <= front:
+                gap = back - o_front - float(v.getMinGap(other))
+                if gap < needed(o_speed, speed, f):
+                    return False
+            else:
+                gap = o_front - float(v.getLength(other)) - front - float(v.getMinGap(vid))
+                if gap < needed(speed, o_speed, f):
+                    return False
         return True
 
     def _wait_for_gap(self, vid: str, direction: int, target_lane: str, pos: float, speed: float) -> None:
