@@ -346,6 +346,28 @@ def test_tactical_lane_changes_are_made_on_request_without_collision(tmp_path: P
     assert off.summary["tactical_lane_changes_enabled"] is False and off.summary["tactical_lane_changes"] == 0
 
 
+def test_lane_change_tracks_go_once_their_vehicle_leaves_them(tmp_path: Path) -> None:
+    """A lane change builds a track for its vehicle alone; it is removed from
+    the RouteFleet once the vehicle moves on (another change, giving up,
+    arriving), so a long run does not pile them up: at every step the live
+    tracks are the shared (cached) ones plus one per vehicle on its own."""
+    sc = sumo.resolve_scenario("highway_onramp")
+    run = SumoRun(sc, RunOptions(controlled_fraction=1.0, end_s=300, tactical_lane_changes=True, progress=False), tmp_path)
+    mismatches: list[tuple[float, int, int]] = []
+
+    def count(r: SumoRun, t: float) -> None:
+        expected = len(r._geo_cache) + sum(1 for a in r.active.values() if a.own_track is not None)
+        if r.fleet.n_tracks != expected:
+            mismatches.append((t, r.fleet.n_tracks, expected))
+
+    run.step_hooks.append(count)
+    result = run.run()
+    changes = sum(r.lane_changes for r in result.records)
+    assert changes >= 30, changes
+    assert mismatches[:3] == [], mismatches[:3]
+    assert run.fleet.n_tracks < len(run._geo_cache) + 10
+
+
 def test_tactical_lane_changes_watch_the_lane_beyond_the_target(tmp_path: Path) -> None:
     """The scenario's own mix (its automated vehicles among SUMO's), 600 s,
     tactical changes on: before the check of the lane beyond the target

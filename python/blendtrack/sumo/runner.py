@@ -317,6 +317,9 @@ class _Active:
     changing: tuple[int, int] | None = None
     #: The change under way is one the route does not need (checked every step, see _changing_leader).
     tactical: bool = False
+    #: The track built for this vehicle alone (a lane change in it), removed
+    #: from the RouteFleet once the vehicle leaves it; None on a shared track.
+    own_track: int | None = None
 
 
 @dataclass
@@ -758,6 +761,8 @@ class SumoRun:
         rec = act.record
         for key, value in self.fleet.remove_vehicle(act.slot).items():
             setattr(rec, key, value)
+        if act.own_track is not None:
+            self.fleet.remove_route(act.own_track)
         rec.end_s = t
         rec.reason = reason
         if act.trajectory is not None and act.trajectory:
@@ -1017,6 +1022,16 @@ class SumoRun:
             k = i if pos is None else pos[i]
             leaders[k] = self._changing_leader(act, leaders[k])
 
+    def _retrack(self, act: _Active, geo: RouteGeometry, track: int, owned: bool) -> None:
+        """Puts ``act`` on ``track`` (``owned``: built for it alone); a track
+        it owned before goes (nobody else drives it), so a long run's lane
+        changes do not pile up tracks."""
+        self.fleet.retrack(act.slot, track)
+        old, act.own_track = act.own_track, (track if owned else None)
+        act.geo = geo
+        if old is not None and old != track:
+            self.fleet.remove_route(old)
+
     def _set_changing(self, act: _Active, changing: tuple[int, int] | None) -> None:
         act.changing = changing
         if changing is None:
@@ -1201,8 +1216,7 @@ class SumoRun:
             self._wait_for_gap(act.vid, direction, target_lane, pos, speed)
             return
         geo2, track = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
-        self.fleet.retrack(act.slot, track)
-        act.geo = geo2
+        self._retrack(act, geo2, track, owned=True)
         self._set_changing(act, (direction, target))
         act.record.lane_changes += 1
 
@@ -1261,8 +1275,7 @@ class SumoRun:
             geo2, track = self._geometry(rest, current, change=(pos, length, target))
         except blendtrack.PathError:
             return  # the target lane does not go on along the route
-        self.fleet.retrack(act.slot, track)
-        act.geo = geo2
+        self._retrack(act, geo2, track, owned=True)
         self._set_changing(act, (direction, target))
         act.tactical = True
         act.record.lane_changes += 1
@@ -1437,8 +1450,7 @@ class SumoRun:
         retried when there is room)."""
         lane_index = int(self.sumo.vehicle.getLaneIndex(act.vid))
         geo, track = self._geometry(act.geo.edges, max(lane_index, 0))
-        self.fleet.retrack(act.slot, track)
-        act.geo = geo
+        self._retrack(act, geo, track, owned=False)
         self._set_changing(act, None)
         self.counts["lane_changes_aborted"] += 1
 
@@ -1644,8 +1656,7 @@ class SumoRun:
         route = tuple(v.getRoute(act.vid))
         idx = max(int(v.getRouteIndex(act.vid)), 0)
         geo, track = self._geometry(route[idx:], max(int(v.getLaneIndex(act.vid)), 0))
-        self.fleet.retrack(act.slot, track)
-        act.geo = geo
+        self._retrack(act, geo, track, owned=False)
         self._set_changing(act, None)
         act.route_id = v.getRouteID(act.vid)
         self.counts["reroutes"] += 1

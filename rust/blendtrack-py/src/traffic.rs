@@ -346,6 +346,12 @@ impl RouteFleet {
         self.inner.retrack(slot, track_id).map_err(traffic_error)
     }
 
+    /// Removes a track no vehicle drives any more (its memory is freed; the
+    /// id is not reused). One still driven raises InputError naming a slot.
+    fn remove_route(&mut self, track_id: i64) -> PyResult<()> {
+        self.inner.remove_route(track_id).map_err(traffic_error)
+    }
+
     /// Frees a slot; returns the vehicle's statistics (a dict).
     fn remove_vehicle<'py>(&mut self, py: Python<'py>, slot: i64) -> PyResult<Bound<'py, PyDict>> {
         let s = self.inner.remove_vehicle(slot).map_err(traffic_error)?;

@@ -52,8 +52,10 @@ pub enum FleetError {
     UnknownSlot { slot: i64 },
     #[error("slot {slot} appears more than once in one step")]
     DuplicateSlot { slot: i64 },
-    #[error("track id {track_id} is not registered")]
+    #[error("track id {track_id} is not registered (never added, or removed)")]
     UnknownTrack { track_id: i64 },
+    #[error("track id {track_id} is still driven by slot {slot}: move or remove the vehicle first")]
+    TrackInUse { track_id: i64, slot: i64 },
     #[error("argument `{name}` = {value}: {message}")]
     Parameter {
         name: &'static str,
@@ -168,7 +170,8 @@ struct TrackEntry {
 /// Tracks and vehicles stepped together (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct Fleet {
-    tracks: Vec<TrackEntry>,
+    /// By id; None once removed (ids are never reused).
+    tracks: Vec<Option<TrackEntry>>,
     slots: Vec<Option<Entry>>,
     n_active: usize,
     /// Per-slot "seen in this step" marks, kept to avoid a per-step allocation.
@@ -197,12 +200,33 @@ impl Fleet {
     pub fn add_track(&mut self, path: Path, config: ControllerConfig) -> Result<usize, FleetError> {
         config.validate()?;
         let track = Arc::new(Track::new(path, &config));
-        self.tracks.push(TrackEntry { track, config });
+        self.tracks.push(Some(TrackEntry { track, config }));
         Ok(self.tracks.len() - 1)
     }
 
+    /// Tracks registered and not removed.
     pub fn n_tracks(&self) -> usize {
-        self.tracks.len()
+        self.tracks.iter().filter(|t| t.is_some()).count()
+    }
+
+    /// Removes a track no vehicle drives any more (its memory goes with
+    /// it); its id is not reused. A track still driven is an error naming
+    /// a slot on it, and nothing changes.
+    pub fn remove_track(&mut self, track_id: i64) -> Result<(), FleetError> {
+        self.track_entry(track_id)?;
+        let id = track_id as usize;
+        if let Some(slot) = self
+            .slots
+            .iter()
+            .position(|e| e.as_ref().is_some_and(|e| e.track_id == id))
+        {
+            return Err(FleetError::TrackInUse {
+                track_id,
+                slot: slot as i64,
+            });
+        }
+        self.tracks[id] = None;
+        Ok(())
     }
 
     /// The track registered under `track_id`.
@@ -214,6 +238,7 @@ impl Fleet {
         usize::try_from(track_id)
             .ok()
             .and_then(|i| self.tracks.get(i))
+            .and_then(Option::as_ref)
             .ok_or(FleetError::UnknownTrack { track_id })
     }
 
@@ -618,7 +643,7 @@ mod tests {
                 let t = if i % 2 == 0 { a } else { b } as i64;
                 let cfg = (i % 3 == 0).then(|| ControllerConfig {
                     lat_blend_factor: 0.2,
-                    ..f.tracks[t as usize].config.clone()
+                    ..f.tracks[t as usize].as_ref().unwrap().config.clone()
                 });
                 f.add_vehicle(t, cfg, None).unwrap() as i64
             })
@@ -823,6 +848,38 @@ mod tests {
             .step(&FleetInputs::new(&slots, &x, &y, &th, &v, &d))
             .unwrap();
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn a_track_is_removed_only_once_nobody_drives_it() {
+        let (mut f, slots) = fleet_with(4);
+        assert_eq!(f.n_tracks(), 2);
+        // Slots 1 and 3 drive track 1.
+        assert_eq!(
+            f.remove_track(1).unwrap_err(),
+            FleetError::TrackInUse { track_id: 1, slot: 1 }
+        );
+        assert_eq!(f.n_tracks(), 2, "a refused removal changes nothing");
+        f.set_vehicle_track(slots[1], 0).unwrap();
+        f.remove_vehicle(slots[3]).unwrap();
+        f.remove_track(1).unwrap();
+        assert_eq!(f.n_tracks(), 1);
+        for err in [
+            f.remove_track(1).unwrap_err(),
+            f.add_vehicle(1, None, None).unwrap_err(),
+            f.set_vehicle_track(slots[0], 1).unwrap_err(),
+        ] {
+            assert_eq!(err, FleetError::UnknownTrack { track_id: 1 });
+        }
+        // The vehicles left still step, and a new track gets a new id.
+        let n = f.len();
+        let (x, y, th, v, d) = (vec![0.0; n], vec![0.5; n], vec![0.0; n], vec![1.0; n], vec![0.0; n]);
+        let live: Vec<i64> = f.slots().into_iter().map(|s| s as i64).collect();
+        f.step(&FleetInputs::new(&live, &x, &y, &th, &v, &d)).unwrap();
+        let id = f
+            .add_track(Path::straight(50.0, 1.0).unwrap(), ControllerConfig::default())
+            .unwrap();
+        assert_eq!(id, 2);
     }
 
     #[test]

@@ -697,6 +697,15 @@ impl RouteFleet {
         Ok(id)
     }
 
+    /// Removes a track (and its route) that no vehicle drives any more,
+    /// e.g. one built for a single vehicle's lane change once it has moved
+    /// on; see [`Fleet::remove_track`].
+    pub fn remove_route(&mut self, track_id: i64) -> Result<(), TrafficError> {
+        self.fleet.remove_track(track_id)?;
+        self.routes[track_id as usize] = None;
+        Ok(())
+    }
+
     fn route_of_track(&self, track_id: i64) -> Result<Arc<Route>, TrafficError> {
         self.fleet.track(track_id)?;
         Ok(self.routes[track_id as usize]
