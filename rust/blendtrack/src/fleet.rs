@@ -983,8 +983,8 @@ mod tests {
             inp.dt_s = Some(0.1);
             let out = fleet.step(&inp).unwrap();
             let n = out.next.unwrap();
-            for i in 0..2 {
-                st[i] = (
+            for (i, s) in st.iter_mut().enumerate() {
+                *s = (
                     n.x_m[i],
                     n.y_m[i],
                     n.theta_rad[i],

@@ -82,7 +82,7 @@ proptest! {
             prop_assert!(out.steering_rad.is_finite() && out.steering_rad.abs() <= vp.max_steering_rad() + 1e-12);
             prop_assert!(out.accel_mps2.is_finite(), "accel {:?}", out);
             prop_assert!(out.lateral_error_m.is_finite() && out.heading_error_rad.is_finite() && out.s_m.is_finite());
-            prop_assert!(out.virtual_obstacle_m > 0.0 || out.virtual_obstacle_m == 0.0);
+            prop_assert!(out.virtual_obstacle_m >= 0.0, "virtual obstacle {}", out.virtual_obstacle_m);
             let mut veh = Vehicle::new(st, vp, ctrl.config().direction, 2);
             veh.step(Command { steering_rad: out.steering_rad, accel_mps2: out.accel_mps2 }, 0.05);
             prop_assert!(veh.state.check_finite().is_ok());
