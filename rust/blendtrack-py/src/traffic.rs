@@ -92,8 +92,11 @@ pub struct RouteFleet {
     name_of: Vec<Option<String>>,
     /// What `leaders_on_lanes` found for the slots it was given, kept for
     /// the next `plan_sumo` with the same slots: (slots, leader per slot).
-    listed: Option<(Vec<i64>, Vec<Option<(i64, f64)>>)>,
+    listed: Option<(Vec<i64>, Vec<ListedLeader>)>,
 }
+
+/// A leader read off a lane list: (its slot, the gap in m), or None.
+type ListedLeader = Option<(i64, f64)>;
 
 /// FNV-1a: SUMO's vehicle ids are short strings hashed a few thousand times
 /// a step; the default SipHash (DoS-resistant, slower) is not needed here.
