@@ -323,6 +323,48 @@ def test_a_lane_change_the_route_does_not_need_ends_on_the_chosen_lane() -> None
         route_geometry(net, edges, 0, change=(100.0, 20.0, 0))
 
 
+def test_the_virtual_borders_of_a_lane_change_are_the_carriageways() -> None:
+    """During a lane change the virtual borders are the edges of the whole
+    carriageway (the edge's lanes side by side) and come back to the lane's
+    half width over a taper after it. With the lane's half width, the
+    change's S-bend put a virtual obstacle 18-25 m ahead of a vehicle on the
+    track (hw_in, straight, three 3.2 m lanes), and the curvature-aware law
+    braked every changing vehicle hard: over this 40 m change (2 s at
+    20 m/s), tracked exactly, the nearest virtual obstacle is under 25 m
+    with the lane's width and over 40 m with the carriageway's (45 m, at
+    the change's steepest point)."""
+    import sumolib
+
+    from blendtrack.sumo.geometry import route_geometry
+
+    net = sumolib.net.readNet(str(SCENARIOS / "highway_onramp" / "highway_onramp.net.xml"), withInternal=True)
+    lanes = net.getEdge("hw_in").getLanes()
+    road = sum(float(ln.getWidth()) for ln in lanes)
+    half = 0.5 * float(lanes[0].getWidth())
+    g = route_geometry(net, ("hw_in", "hw_up"), 0, change=(200.0, 40.0, 1))
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(g.points, axis=0).T))])
+    during = (s > 205.0) & (s < 235.0)
+    assert np.allclose(g.widths[during].sum(axis=1), road, atol=1e-6)
+    assert np.allclose(g.widths[s < 195.0], half) and np.allclose(g.widths[(s > 500.0) & (s < 900.0)], half)
+
+    def nearest_obstacle(widths: np.ndarray) -> float:
+        fleet = blendtrack.Fleet()
+        track = fleet.add_track(blendtrack.Path(g.points, widths, closed=False))
+        nearest = math.inf
+        for s0 in range(150, 300, 5):
+            i = int(np.searchsorted(s, s0))
+            d = g.points[i + 1] - g.points[i]
+            slot = fleet.add_vehicle(track)
+            out = fleet.step([slot], [g.points[i, 0]], [g.points[i, 1]], [math.atan2(d[1], d[0])], [20.0], [0.0])
+            nearest = min(nearest, float(out["virtual_obstacle_m"][0]))
+            fleet.remove_vehicle(slot)
+        return nearest
+
+    lane_only = nearest_obstacle(np.full_like(g.widths, half))
+    road_wide = nearest_obstacle(g.widths)
+    assert lane_only < 25.0 and road_wide > 40.0, (lane_only, road_wide)
+
+
 def test_tactical_lane_changes_are_made_on_request_without_collision(tmp_path: Path) -> None:
     """--tactical-lane-changes: where SUMO's lane-change model wants a change
     the route does not need (speed gain, keep right) and the target lane has

@@ -152,6 +152,9 @@ class _Piece:
     on_lane: bool = True
     #: (traffic light id or "", link index, major) when this piece enters a junction.
     tls: tuple[str, int, bool] | None = None
+    #: Per point (right, left) distances (m) to the virtual borders, where
+    #: they are not the lane's half width (the middle of a lane change).
+    widths: np.ndarray | None = None
 
 
 def _lane_piece(
@@ -175,6 +178,34 @@ def _lane_piece(
         max(float(_arc(raw)[-1]), 1e-9),
         on_lane,
     )
+
+
+#: After a lane change the virtual borders come back from the carriageway's
+#: edges to the lane's over this many times the change's length, at least
+#: LANE_CHANGE_TAPER_MIN_M metres.
+LANE_CHANGE_TAPER_FACTOR = 3.0
+LANE_CHANGE_TAPER_MIN_M = 100.0
+
+
+def _carriageway_widths(a: Any, b: Any, w: np.ndarray) -> np.ndarray:
+    """(right, left) distances from the points of a lane change (``w`` of
+    the way from lane ``a``'s centreline to lane ``b``'s, two lanes of one
+    edge) to the edges of the whole carriageway, all the edge's lanes side
+    by side (SUMO's lane index 0 on the right). During a change the vehicle
+    may use the road, not only one lane: with a lane's half width the path's
+    S-bend and the vehicle's angle across its lane would put the virtual
+    border 15-25 m ahead, and the curvature-aware law would brake every
+    changing vehicle hard (from 20 m/s to under 10)."""
+    lanes = sorted(a.getEdge().getLanes(), key=lambda ln: ln.getIndex())
+    widths = [float(ln.getWidth()) for ln in lanes]
+    right_edge = np.cumsum([0.0, *widths])
+
+    def centre(lane: Any) -> float:
+        i = lane.getIndex()
+        return float(right_edge[i] + 0.5 * widths[i])
+
+    offset = centre(a) + w * (centre(b) - centre(a))
+    return np.column_stack([offset, right_edge[-1] - offset])
 
 
 def _lane_change_pieces(
@@ -202,9 +233,20 @@ def _lane_change_pieces(
     if before.any():
         out.append(_lane_piece(a, spacing_m, pts[before], da[before]))
     if middle.any():
-        out.append(_lane_piece(b, spacing_m, pts[middle], tb[middle], on_lane=False))
+        piece = _lane_piece(b, spacing_m, pts[middle], tb[middle], on_lane=False)
+        piece.widths = _carriageway_widths(a, b, w[middle])
+        out.append(piece)
     if after.any():
-        out.append(_lane_piece(b, spacing_m, pts[after], tb[after]))
+        piece = _lane_piece(b, spacing_m, pts[after], tb[after])
+        if middle.any():
+            # Back from the carriageway to the lane's half width over a
+            # taper: a step at the change's end would cross the lane the
+            # vehicle leaves, a wall straight ahead of it until it turns.
+            edges = _carriageway_widths(a, b, np.ones(int(after.sum())))
+            taper = max(LANE_CHANGE_TAPER_FACTOR * length, LANE_CHANGE_TAPER_MIN_M)
+            u = np.clip((da[after] - (start + length)) / taper, 0.0, 1.0)[:, None]
+            piece.widths = (1.0 - u) * edges + u * piece.half_width_m
+        out.append(piece)
     return out
 
 
@@ -413,7 +455,10 @@ def route_geometry(
                 stops[j] = (*stops[j][:5], s)
         s += float(_arc(shape)[-1])
         pts.append(shape)
-        wid.append(np.full((len(shape), 2), pc.half_width_m + border_margin_m))
+        if pc.widths is not None:
+            wid.append(pc.widths[len(pc.widths) - len(shape):] + border_margin_m)
+        else:
+            wid.append(np.full((len(shape), 2), pc.half_width_m + border_margin_m))
         n_pts += len(shape)
         end.append(n_pts)
         last = shape[-1]
