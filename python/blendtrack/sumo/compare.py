@@ -544,7 +544,7 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
     bins = np.linspace(0, top, 60)
     for which, v in zip(("baseline", "treatment"), allv):
         if len(v):
-            ax.hist(v, bins=bins, density=True, color=colors[which], label=which,
+            ax.hist(v, bins=bins.tolist(), density=True, color=colors[which], label=which,
                     **({"alpha": 0.5} if which == "baseline" else {"histtype": "step", "lw": 1.5}))
     ax.axvline(comfort, color="k", ls="--", lw=1, label=f"comfort {comfort:g} m/s^2")
     ax.set_yscale("log")
@@ -587,19 +587,18 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
     # curvature in the treatment), and the same vehicle there in the baseline.
     best = None
     for row in r0.rows:
-        tr = r0.treat.fcd[row["id"]]
-        t_k, _, kap = lateral_series(tr, dt)
+        t_k, _, kap = lateral_series(r0.treat.fcd[row["id"]], dt)
         if len(kap) and np.isfinite(kap).any():
             j = int(np.nanargmax(kap))
             if best is None or kap[j] > best[0]:
                 best = (float(kap[j]), row["id"], float(t_k[j]))
     if best is not None:
         _, vid, t_peak = best
-        tt = r0.treat.fcd[vid]
-        i = min(int(np.searchsorted(tt.t, t_peak)), len(tt.t) - 1)
+        peak = r0.treat.fcd[vid]
+        i = min(int(np.searchsorted(peak.t, t_peak)), len(peak.t) - 1)
         # The middle of the 1 s window that had the largest curvature.
         i = max(i - max(1, round(LAT_WINDOW_S / dt)) // 2, 0)
-        cx, cy = tt.x[i], tt.y[i]
+        cx, cy = peak.x[i], peak.y[i]
         fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4.5))
         for which, run in (("baseline", r0.base), ("treatment", r0.treat)):
             tr = run.fcd[vid]
@@ -639,11 +638,11 @@ def write_outputs(results: list[SeedResult], out: Path, scenario: Scenario, opts
             for row in r.rows:
                 w.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else (repr(v) if isinstance(v, float) else v)) for k, v in row.items()})
     with open(out / "network.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["seed", "run", *[m for m, _, _ in NETWORK_METRICS]])
+        nw = csv.writer(f)
+        nw.writerow(["seed", "run", *[m for m, _, _ in NETWORK_METRICS]])
         for r in results:
             for which in ("baseline", "treatment"):
-                w.writerow([r.seed, which, *[repr(r.network[which][m]) for m, _, _ in NETWORK_METRICS]])
+                nw.writerow([r.seed, which, *[repr(r.network[which][m]) for m, _, _ in NETWORK_METRICS]])
     table = summarise(results)
     plots = _plots(results, out, dt, comfort)
     text = plain_text(table, results, opts.baseline)
@@ -657,7 +656,7 @@ def write_outputs(results: list[SeedResult], out: Path, scenario: Scenario, opts
     head = [
         f"# blendtrack compare: {scenario.name}",
         "",
-        f"Baseline: SUMO's car-following model ({'as in the scenario' if opts.baseline == 'krauss' else MODELS[opts.baseline] + ' for every vType, in both runs'}), no blendtrack. "
+        f"Baseline: SUMO's car-following model ({'as in the scenario' if opts.baseline == 'krauss' else f'{MODELS[opts.baseline]} for every vType, in both runs'}), no blendtrack. "
         f"Treatment: blendtrack drives {sel}. Seeds 0..{opts.seeds - 1}, end {fmt(end_s) if end_s is not None else 'scenario default'} s, step {dt:g} s.",
         f"Vehicles paired by id: {sum(len(r.rows) for r in results)}; selected in only one of the two runs (not paired): {unpaired}.",
         "",

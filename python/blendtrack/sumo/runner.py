@@ -538,7 +538,9 @@ class SumoRun:
         raw: Any = None
         if self.backend == "libsumo":
             try:
-                from libsumo import _libsumo as raw
+                import libsumo._libsumo
+
+                raw = libsumo._libsumo
             except ImportError:  # a libsumo built differently: its wrappers then
                 raw = None
 
@@ -1104,11 +1106,10 @@ class SumoRun:
             self._tactical_changes()
         if self._has_tls:
             self._refresh_tls()
-        leaders, read, lanes, poss = self._observe(t)
+        (asked, leaders), read, lanes, poss = self._observe(t)
         if not self._ids:
             return
         ids, order, fleet = self._ids, self._order, self.fleet
-        asked, leaders = leaders
         queries = fleet.plan_sumo(self._slots, leaders, self._get_speed, read, lanes, poss, asked).tolist()
         answers = [self._must_yield(ids[i], order[i].slot) for i in queries]
         out = fleet.step(np.array(answers, dtype=bool), self.dt)
@@ -1122,18 +1123,18 @@ class SumoRun:
         speeds = out["sumo_speed_mps"]
         failed: list[int] = []
         set_speed, move_to, move_xy = self._set_speed, self._move_to, self._move_to_xy
-        idx = np.flatnonzero(moves == _SPEED).tolist()
+        speed_idx = np.flatnonzero(moves == _SPEED).tolist()
         try:
             # The bulk: one call each, no per-vehicle Python beyond it.
-            list(map(set_speed, map(ids.__getitem__, idx), speeds[idx].tolist()))
+            list(map(set_speed, map(ids.__getitem__, speed_idx), speeds[speed_idx].tolist()))
         except Exception:
             # A vehicle gone (removed by another client): find which, one by one.
-            for i, sp in zip(idx, speeds[idx].tolist()):
+            for i, sp in zip(speed_idx, speeds[speed_idx].tolist()):
                 try:
                     set_speed(ids[i], sp)
                 except Exception:
                     failed.append(i)
-        self.moves["speed"] += len(idx)
+        self.moves["speed"] += len(speed_idx)
         self.moves["none"] += int(np.count_nonzero(moves == _HOLD))
         lane_names = self._lanes.names
         idx = np.flatnonzero(moves == _LANE)
@@ -1146,10 +1147,10 @@ class SumoRun:
         self.moves["lane"] += len(idx)
         idx = np.flatnonzero(moves == _XY)
         edge_names = self._edges.names
-        cols = (out[k][idx].tolist() for k in ("edge", "lane_index", "x_front_m", "y_front_m", "angle_deg"))
-        for i, edge, lane_index, xf, yf, angle, sp in zip(idx.tolist(), *cols, speeds[idx].tolist()):
+        xy_cols = (out[k][idx].tolist() for k in ("edge", "lane_index", "x_front_m", "y_front_m", "angle_deg"))
+        for i, edge, lane_index, x_front, y_front, angle, sp in zip(idx.tolist(), *xy_cols, speeds[idx].tolist()):
             try:
-                move_xy(ids[i], edge_names[edge], lane_index, xf, yf, angle, 3)
+                move_xy(ids[i], edge_names[edge], lane_index, x_front, y_front, angle, 3)
                 # Without it SUMO keeps reporting the last setSpeed value,
                 # and followers plan with a wrong leader speed.
                 set_speed(ids[i], sp)
@@ -1176,12 +1177,12 @@ class SumoRun:
                 (ids[i], lane, pos, sp) for i, lane, pos, sp in zip(due.tolist(), out["lane"][due].tolist(), front, v.tolist())
             ]
         if self._tracing:
-            cols = [out[k] for k in ("x_front_m", "y_front_m", "v_mps", "lateral_error_m", "curvature_per_m")]
+            xf, yf, vv, ee, kk = (out[k] for k in ("x_front_m", "y_front_m", "v_mps", "lateral_error_m", "curvature_per_m"))
             index = self._index
             for act in self._tracing.values():
-                i = index.get(act.vid)
-                if i is not None and i < len(acts) and acts[i] is act and act.trajectory is not None:
-                    act.trajectory.append((t, *(float(c[i]) for c in cols)))
+                j = index.get(act.vid)
+                if j is not None and j < len(acts) and acts[j] is act and act.trajectory is not None:
+                    act.trajectory.append((t, float(xf[j]), float(yf[j]), float(vv[j]), float(ee[j]), float(kk[j])))
         if self.opt.trace:
             self._trace(t, ids, acts, out)
 
