@@ -394,7 +394,7 @@ def test_lane_change_tracks_go_once_their_vehicle_leaves_them(tmp_path: Path) ->
     arriving), so a long run does not pile them up: at every step the live
     tracks are the shared (cached) ones plus one per vehicle on its own."""
     sc = sumo.resolve_scenario("highway_onramp")
-    run = SumoRun(sc, RunOptions(controlled_fraction=1.0, end_s=300, tactical_lane_changes=True, progress=False), tmp_path)
+    run = SumoRun(sc, RunOptions(controlled_fraction=1.0, end_s=200, tactical_lane_changes=True, progress=False), tmp_path)
     mismatches: list[tuple[float, int, int]] = []
 
     def count(r: SumoRun, t: float) -> None:
