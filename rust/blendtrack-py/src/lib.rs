@@ -10,13 +10,13 @@
 //! is kept out of the workspace's default members so a bare `cargo test`
 //! stays Python-free. Every name registered here must also be declared in
 //! `python/blendtrack/_blendtrack.pyi` (checked by `mypy.stubtest`).
-
-// `!(x >= y)` is a NaN guard on purpose (see the core crate).
-#![allow(clippy::neg_cmp_op_on_partial_ord)]
 //!
 //! Modules: `errors` (exception classes and core-error mapping), `path`
 //! (`Path`), `config` (`ControllerConfig`, `VehicleParams`, `load_config`),
 //! `sim` (`simulate`, `compute_metrics`), `fleet` (`Fleet`).
+
+// `!(x >= y)` is a NaN guard on purpose (see the core crate).
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 use pyo3::prelude::*;
 
