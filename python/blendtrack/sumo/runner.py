@@ -1074,7 +1074,7 @@ class SumoRun:
             # Until SUMO puts it on the target lane nobody there sees it, and
             # a SUMO driver may move onto that lane from the far side: a
             # change that is only wanted is given up whenever its room goes.
-            if not self._tactical_room(act.vid, direction, float(v.getSpeed(act.vid)), keep=True):
+            if not self._tactical_room(act.vid, direction, float(v.getSpeed(act.vid)), TACTICAL_KEEP_FACTOR):
                 self._abort_change(act)
                 return lead
         elif abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M:
@@ -1236,9 +1236,7 @@ class SumoRun:
             self._wait_for_gap(act.vid, direction, target_lane, pos, speed)
             return
         geo2, track = self._geometry(geo.edges[k_edge:], current, change=(pos, length))
-        self._retrack(act, geo2, track, owned=True)
-        self._set_changing(act, (direction, target))
-        act.record.lane_changes += 1
+        self._begin_change(act, geo2, track, direction, target)
 
     def _note_insertion(self, vid: str) -> None:
         """Where SUMO inserted ``vid``: the furthest insertion point per edge."""
@@ -1301,17 +1299,24 @@ class SumoRun:
         length = _change_length(speed, float(lane.getLength()) - pos - 1.0)
         if length < 8.0 or not self._target_lane_clear(act.vid, direction, speed, length / speed):
             return
-        if not self._tactical_room(act.vid, direction, speed) or self._changing_into(edge, target, act.vid):
+        far = target + direction
+        if not self._tactical_room(act.vid, direction, speed, 1.0) or self._changing_into(edge, target, act.vid):
+            return
+        if 0 <= far < lane.getEdge().getLaneNumber() and not self._far_lane_room(act.vid, f"{edge}_{far}", pos, speed):
             return
         try:
             geo2, track = self._geometry(rest, current, change=(pos, length, target))
         except blendtrack.PathError:
             return  # the target lane does not go on along the route
-        self._retrack(act, geo2, track, owned=True)
-        self._set_changing(act, (direction, target))
+        self._begin_change(act, geo2, track, direction, target)
         act.tactical = True
-        act.record.lane_changes += 1
         self.counts["tactical_lane_changes"] += 1
+
+    def _begin_change(self, act: _Active, geo: RouteGeometry, track: int, direction: int, target: int) -> None:
+        """``act`` starts a lane change on its own ``track`` (built for it)."""
+        self._retrack(act, geo, track, owned=True)
+        self._set_changing(act, (direction, target))
+        act.record.lane_changes += 1
 
     def _changing_into(self, edge: str, target: int, vid: str) -> bool:
         """Is another controlled vehicle changing onto lane ``target`` of
@@ -1327,51 +1332,39 @@ class SumoRun:
                     continue
         return False
 
-    def _tactical_room(self, vid: str, direction: int, speed: float, keep: bool = False) -> bool:
-        """Gaps for a change that is only wanted (see ``TACTICAL_HEADWAY_S``)
-        on the target lane, and on the lane beyond it: a SUMO driver there
-        may move onto the target lane at the same time, and SUMO's drivers
-        see the changer only once SUMO has put it there (a collision of one
-        at 33 m/s, from 3.5 m behind, before this check). The lane beyond
-        is held to the smaller room (``TACTICAL_KEEP_FACTOR``) and only
-        before the change starts; ``keep``: the check of a change under way,
-        the target lane held to the smaller room."""
+    def _tactical_room(self, vid: str, direction: int, speed: float, factor: float) -> bool:
+        """Gaps on the target lane for a change that is only wanted (see
+        ``TACTICAL_HEADWAY_S``), the headway and braking terms scaled by
+        ``factor``: 1 to start, ``TACTICAL_KEEP_FACTOR`` to go on."""
         v = self.sumo.vehicle
         side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
-
-        def needed(rear: float, front: float, f: float) -> float:
-            rear, front = max(rear, 0.0), max(front, 0.0)
-            return LANE_CHANGE_GAP_M + f * (TACTICAL_HEADWAY_S * rear + max(rear * rear - front * front, 0.0) / (2.0 * TACTICAL_DECEL_MPS2))
-
-        f = TACTICAL_KEEP_FACTOR if keep else 1.0
         for nid, gap in v.getNeighbors(vid, side):
-            if gap < needed(float(v.getSpeed(nid)), speed, f):
+            if gap < _tactical_gap(float(v.getSpeed(nid)), speed, factor):
                 return False
         for nid, gap in v.getNeighbors(vid, side | 2):
-            if gap < needed(speed, float(v.getSpeed(nid)), f):
+            if gap < _tactical_gap(speed, float(v.getSpeed(nid)), factor):
                 return False
-        if keep:
-            return True
-        f = TACTICAL_KEEP_FACTOR
-        lane_id = v.getLaneID(vid)
-        edge, _, index = lane_id.rpartition("_")
-        if not index.isdigit():
-            return True
-        far = int(index) + 2 * direction
-        if not 0 <= far < self._net_geometry().getLane(lane_id).getEdge().getLaneNumber():
-            return True
-        front = float(v.getLanePosition(vid))
+        return True
+
+    def _far_lane_room(self, vid: str, far_lane: str, front: float, speed: float) -> bool:
+        """Gaps (``TACTICAL_KEEP_FACTOR`` of them) to the vehicles on the lane
+        beyond the target lane, checked before a change that is only wanted
+        starts: a SUMO driver there may move onto the target lane at the same
+        time, and SUMO's drivers see the changer only once SUMO has put it
+        there (a collision of one at 33 m/s, from 3.5 m behind, before this
+        check). ``front``: the changer's front on its lane."""
+        v = self.sumo.vehicle
         back = front - float(v.getLength(vid))
-        for other in self._vehicles_on(f"{edge}_{far}"):
+        for other in self._vehicles_on(far_lane):
             o_front = float(v.getLanePosition(other))
             o_speed = float(v.getSpeed(other))
             if o_front <= front:
                 gap = back - o_front - float(v.getMinGap(other))
-                if gap < needed(o_speed, speed, f):
+                if gap < _tactical_gap(o_speed, speed, TACTICAL_KEEP_FACTOR):
                     return False
             else:
                 gap = o_front - float(v.getLength(other)) - front - float(v.getMinGap(vid))
-                if gap < needed(speed, o_speed, f):
+                if gap < _tactical_gap(speed, o_speed, TACTICAL_KEEP_FACTOR):
                     return False
         return True
 
@@ -1805,6 +1798,13 @@ def _option_name(token: str) -> str | None:
         return None
     except ValueError:
         return token.split("=", 1)[0].lstrip("-")
+
+
+def _tactical_gap(rear: float, front: float, factor: float) -> float:
+    """The gap (m) a change that is only wanted asks between a rear vehicle
+    at ``rear`` m/s and a front one at ``front`` (see ``TACTICAL_HEADWAY_S``)."""
+    rear, front = max(rear, 0.0), max(front, 0.0)
+    return LANE_CHANGE_GAP_M + factor * (TACTICAL_HEADWAY_S * rear + max(rear * rear - front * front, 0.0) / (2.0 * TACTICAL_DECEL_MPS2))
 
 
 def _change_length(speed: float, room_m: float) -> float:
