@@ -313,7 +313,9 @@ impl ControllerConfig {
 
     /// Pickling (worker processes of `blendtrack batch`, `run_scenario`'s
     /// child process): rebuilt from its TOML, validated again.
-    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
         let text = slf.borrow().to_toml(false)?;
         Ok((slf.get_type().getattr("from_toml")?, (text, "<pickle>")))
     }
@@ -407,7 +409,9 @@ impl VehicleParams {
     }
 
     /// Pickling: rebuilt from its TOML, validated again.
-    fn __reduce__<'py>(slf: &Bound<'py, Self>) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
         let text = slf.borrow().to_toml()?;
         Ok((slf.get_type().getattr("from_toml")?, (text, "<pickle>")))
     }

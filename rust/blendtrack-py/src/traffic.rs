@@ -105,7 +105,11 @@ struct Fnv(u64);
 
 impl Hasher for Fnv {
     fn write(&mut self, bytes: &[u8]) {
-        let mut h = if self.0 == 0 { 0xcbf2_9ce4_8422_2325 } else { self.0 };
+        let mut h = if self.0 == 0 {
+            0xcbf2_9ce4_8422_2325
+        } else {
+            self.0
+        };
         for &b in bytes {
             h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
         }
@@ -491,12 +495,14 @@ impl RouteFleet {
             Some(idx) => {
                 let Some((listed_slots, found)) = listed else {
                     return Err(input_error(
-                        "leader_index given without a leaders_on_lanes call for these slots before".to_string(),
+                        "leader_index given without a leaders_on_lanes call for these slots before"
+                            .to_string(),
                     ));
                 };
                 if listed_slots != sl {
                     return Err(input_error(
-                        "leader_index: the slots differ from the last leaders_on_lanes call".to_string(),
+                        "leader_index: the slots differ from the last leaders_on_lanes call"
+                            .to_string(),
                     ));
                 }
                 for (i, f) in found.into_iter().enumerate() {
@@ -529,7 +535,10 @@ impl RouteFleet {
                 input_error(format!("leaders[{k}] is not None or an (id, gap) tuple"))
             })?;
             if t.len() != 2 {
-                return Err(input_error(format!("leaders[{k}] has {} items, expected 2 (id, gap)", t.len())));
+                return Err(input_error(format!(
+                    "leaders[{k}] has {} items, expected 2 (id, gap)",
+                    t.len()
+                )));
             }
             let id = t.get_item(0)?;
             let id = id
@@ -562,10 +571,9 @@ impl RouteFleet {
         same_len("read_lane", ri.len(), rl.len())?;
         same_len("read_pos", ri.len(), rp.len())?;
         for (k, &i) in ri.iter().enumerate() {
-            let i = usize::try_from(i)
-                .ok()
-                .filter(|&i| i < n)
-                .ok_or_else(|| input_error(format!("read_index[{k}] = {i}: not an index into slots")))?;
+            let i = usize::try_from(i).ok().filter(|&i| i < n).ok_or_else(|| {
+                input_error(format!("read_index[{k}] = {i}: not an index into slots"))
+            })?;
             ln[i] = rl[k];
             lp[i] = rp[k];
         }
@@ -583,10 +591,21 @@ impl RouteFleet {
     /// The lanes (the caller's ids) on which at least two of `slots` are where
     /// blendtrack knows the simulator has them: the lanes worth listing for
     /// `leaders_on_lanes`.
-    fn lanes_with_followers<'py>(&self, py: Python<'py>, slots: I64In<'py>) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    fn lanes_with_followers<'py>(
+        &self,
+        py: Python<'py>,
+        slots: I64In<'py>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let sl = vec_of(&slots);
-        let lanes = self.inner.lanes_with_followers(&sl).map_err(traffic_error)?;
-        Ok(lanes.into_iter().map(i64::from).collect::<Vec<_>>().into_pyarray(py))
+        let lanes = self
+            .inner
+            .lanes_with_followers(&sl)
+            .map_err(traffic_error)?;
+        Ok(lanes
+            .into_iter()
+            .map(i64::from)
+            .collect::<Vec<_>>()
+            .into_pyarray(py))
     }
 
     /// Leaders read off SUMO's `lane.getLastStepVehicleIDs` of `lanes` (one
@@ -642,7 +661,12 @@ impl RouteFleet {
         let out = pyo3::types::PyList::empty(py);
         if let Some((_, found)) = &self.listed {
             for f in found {
-                match f.and_then(|(l, gap)| self.name_of.get(l as usize).and_then(Option::as_ref).map(|n| (n, gap))) {
+                match f.and_then(|(l, gap)| {
+                    self.name_of
+                        .get(l as usize)
+                        .and_then(Option::as_ref)
+                        .map(|n| (n, gap))
+                }) {
                     Some((name, gap)) => out.append((name.as_str(), gap))?,
                     None => out.append(py.None())?,
                 }
@@ -742,7 +766,11 @@ impl RouteFleet {
 
 impl RouteFleet {
     /// The core's plan with the interpreter released; the query indices as an array.
-    fn run_plan<'py>(&mut self, py: Python<'py>, obs: &Observations<'_>) -> PyResult<Bound<'py, PyArray1<i64>>> {
+    fn run_plan<'py>(
+        &mut self,
+        py: Python<'py>,
+        obs: &Observations<'_>,
+    ) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let inner = &mut self.inner;
         let q = py.detach(|| inner.plan(obs)).map_err(traffic_error)?;
         Ok(q.into_iter()

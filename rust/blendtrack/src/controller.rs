@@ -248,9 +248,10 @@ impl Controller {
         let th_travel = travel_heading(measured.theta_rad, dir);
 
         // Crossings beyond the relevance distance cannot change the command.
-        let horizon = self.cfg.ray_horizon_m.min(
-            relevance_distance(speed, &self.cfg) + 2.0 * track.corridor.max_width() + 5.0,
-        );
+        let horizon = self
+            .cfg
+            .ray_horizon_m
+            .min(relevance_distance(speed, &self.cfg) + 2.0 * track.corridor.max_width() + 5.0);
         // Forward, the ray runs along the heading: its (cos, sin) is `h`.
         let u = match dir {
             crate::vehicle::Direction::Forward => h,

@@ -54,7 +54,9 @@ pub enum FleetError {
     DuplicateSlot { slot: i64 },
     #[error("track id {track_id} is not registered (never added, or removed)")]
     UnknownTrack { track_id: i64 },
-    #[error("track id {track_id} is still driven by slot {slot}: move or remove the vehicle first")]
+    #[error(
+        "track id {track_id} is still driven by slot {slot}: move or remove the vehicle first"
+    )]
     TrackInUse { track_id: i64, slot: i64 },
     #[error("argument `{name}` = {value}: {message}")]
     Parameter {
@@ -857,7 +859,10 @@ mod tests {
         // Slots 1 and 3 drive track 1.
         assert_eq!(
             f.remove_track(1).unwrap_err(),
-            FleetError::TrackInUse { track_id: 1, slot: 1 }
+            FleetError::TrackInUse {
+                track_id: 1,
+                slot: 1
+            }
         );
         assert_eq!(f.n_tracks(), 2, "a refused removal changes nothing");
         f.set_vehicle_track(slots[1], 0).unwrap();
@@ -873,11 +878,21 @@ mod tests {
         }
         // The vehicles left still step, and a new track gets a new id.
         let n = f.len();
-        let (x, y, th, v, d) = (vec![0.0; n], vec![0.5; n], vec![0.0; n], vec![1.0; n], vec![0.0; n]);
+        let (x, y, th, v, d) = (
+            vec![0.0; n],
+            vec![0.5; n],
+            vec![0.0; n],
+            vec![1.0; n],
+            vec![0.0; n],
+        );
         let live: Vec<i64> = f.slots().into_iter().map(|s| s as i64).collect();
-        f.step(&FleetInputs::new(&live, &x, &y, &th, &v, &d)).unwrap();
+        f.step(&FleetInputs::new(&live, &x, &y, &th, &v, &d))
+            .unwrap();
         let id = f
-            .add_track(Path::straight(50.0, 1.0).unwrap(), ControllerConfig::default())
+            .add_track(
+                Path::straight(50.0, 1.0).unwrap(),
+                ControllerConfig::default(),
+            )
             .unwrap();
         assert_eq!(id, 2);
     }

@@ -693,7 +693,8 @@ impl Path {
                 a = self.length - w;
             }
         }
-        wrap_angle(self.heading_at_from(b, segment_hint) - self.heading_at_from(a, segment_hint)) / w
+        wrap_angle(self.heading_at_from(b, segment_hint) - self.heading_at_from(a, segment_hint))
+            / w
     }
 
     /// Widths at `s`, interpolated between vertices; `None` if the path has none.
@@ -829,7 +830,12 @@ impl Path {
 
     /// [`Self::project_near`] with a guess of the segment holding `hint_s`
     /// (any value is fine; the last step's `segment` saves a look-up).
-    pub fn project_near_from(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> Projection {
+    pub fn project_near_from(
+        &self,
+        p: &Point2<f64>,
+        hint_s: f64,
+        segment_hint: usize,
+    ) -> Projection {
         let (d2, k, t) = self.nearest_near(p, hint_s, segment_hint);
         self.make_projection_flat(p, k, t, d2)
     }

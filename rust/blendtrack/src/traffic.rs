@@ -208,7 +208,13 @@ impl Route {
             }
             // (what, value, unit, allowed, rule)
             let checks = [
-                ("has lane scale", p.scale, "", p.scale > 0.0, "finite and > 0"),
+                (
+                    "has lane scale",
+                    p.scale,
+                    "",
+                    p.scale > 0.0,
+                    "finite and > 0",
+                ),
                 (
                     "starts at lane position",
                     p.lane_pos_start_m,
@@ -435,7 +441,12 @@ const GLIDE_MAX_LANE_ENDS: usize = 3;
 /// where it has it (`known`: lane, position) to lane position `target` on
 /// piece `k`, and whether that passes a lane end; None when it cannot tell
 /// (unknown position, or a lane the route's pieces do not lead from).
-fn glide_distance(route: &Route, k: usize, target: f64, known: Option<(u32, f64)>) -> Option<(f64, bool)> {
+fn glide_distance(
+    route: &Route,
+    k: usize,
+    target: f64,
+    known: Option<(u32, f64)>,
+) -> Option<(f64, bool)> {
     let (lane, p) = known?;
     let pieces = &route.pieces;
     if pieces[k].lane == lane {
@@ -1170,7 +1181,8 @@ impl RouteFleet {
                     .fleet
                     .track(self.fleet.vehicle_track(slot as i64)? as i64)?
                     .path;
-                let (s, seg) = path.arc_near_from(&Point2::new(xf, yf), d.s_front_m + v * dt_s, d.seg_front);
+                let (s, seg) =
+                    path.arc_near_from(&Point2::new(xf, yf), d.s_front_m + v * dt_s, d.seg_front);
                 d.seg_front = seg;
                 s
             } else {
@@ -1785,7 +1797,10 @@ mod tests {
             assert!(out.moves[0] != Move::Invalid);
             slowest = slowest.min(out.v_mps[0]);
         }
-        assert!(slowest > 14.5, "kept its speed to the end: slowest {slowest} m/s");
+        assert!(
+            slowest > 14.5,
+            "kept its speed to the end: slowest {slowest} m/s"
+        );
         // A few steps past the end (the simulator is late to take it out):
         // still a usable move, no panic.
         for _ in 0..10 {
@@ -1831,7 +1846,11 @@ mod tests {
         let s = f.remove_vehicle(a).unwrap();
         let front = 2.6 * 0.1_f64.sin();
         assert!(s.sum_abs_e_rear < 1e-9, "{}", s.sum_abs_e_rear);
-        assert!((s.sum_abs_e_front - front).abs() < 1e-9, "{}", s.sum_abs_e_front);
+        assert!(
+            (s.sum_abs_e_front - front).abs() < 1e-9,
+            "{}",
+            s.sum_abs_e_front
+        );
         assert!((s.sum_abs_e - 0.5 * front).abs() < 1e-9, "{}", s.sum_abs_e);
     }
 
@@ -2041,7 +2060,9 @@ mod tests {
     #[test]
     fn on_its_lane_a_vehicle_is_moved_by_its_speed_alone() {
         let (mut f, t) = fleet_on(road(None, true));
-        let a = f.add_vehicle(t, None, None, body(), at(20.0, 14.5)).unwrap() as i64;
+        let a = f
+            .add_vehicle(t, None, None, body(), at(20.0, 14.5))
+            .unwrap() as i64;
         let mut sim = Sim::on_lane_10();
         let mut read = true;
         let mut counts = [0usize; 5];
@@ -2053,7 +2074,11 @@ mod tests {
             read = out.read_position[0];
             counts[out.moves[0] as usize] += 1;
             if k == 0 {
-                assert_eq!(out.moves[0], Move::Lane, "the first move places the vehicle");
+                assert_eq!(
+                    out.moves[0],
+                    Move::Lane,
+                    "the first move places the vehicle"
+                );
             }
             let (lane, want) = front_lane_pos(&f, a);
             assert_eq!(lane, 10);
@@ -2070,7 +2095,10 @@ mod tests {
             assert_eq!(read, f.stats(a).unwrap().steps % 10 == 0, "step {k}");
         }
         assert!(counts[Move::Speed as usize] > 20, "{counts:?}");
-        assert!(counts[Move::Hold as usize] > 10, "cruising needs no command: {counts:?}");
+        assert!(
+            counts[Move::Hold as usize] > 10,
+            "cruising needs no command: {counts:?}"
+        );
         assert_eq!(counts[Move::Lane as usize], 1, "{counts:?}");
         assert_eq!(counts[Move::Xy as usize], 0, "{counts:?}");
     }
@@ -2081,7 +2109,9 @@ mod tests {
         let (path, mut route) = road(None, true);
         route.pieces[1].offset_m = 0.02;
         let (mut f, t) = fleet_on((path, route));
-        let a = f.add_vehicle(t, None, None, body(), at(150.0, 10.0)).unwrap() as i64;
+        let a = f
+            .add_vehicle(t, None, None, body(), at(150.0, 10.0))
+            .unwrap() as i64;
         let mut sim = Sim {
             lanes: vec![(10, 200.0), (11, 10.0), (12, 390.0 * 1.01)],
             lane: 0,
@@ -2152,15 +2182,22 @@ mod tests {
                 assert!(sim.pos >= before, "never backwards");
                 let v = out.v_mps[0];
                 assert!(
-                    (out.sumo_speed_mps[0] - v).abs() <= GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * v + 1e-9,
+                    (out.sumo_speed_mps[0] - v).abs()
+                        <= GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * v + 1e-9,
                     "the speed SUMO reports stays near the vehicle's"
                 );
                 let (_, want) = front_lane_pos(&f, a);
                 let now = sim.pos - want;
-                assert!(now.abs() <= err.abs() + 1e-9, "offset {offset}, step {k}: {now} vs {err}");
+                assert!(
+                    now.abs() <= err.abs() + 1e-9,
+                    "offset {offset}, step {k}: {now} vs {err}"
+                );
                 err = now;
             }
-            assert!(err.abs() < 1e-6, "offset {offset}: made up after 40 steps, {err} left");
+            assert!(
+                err.abs() < 1e-6,
+                "offset {offset}: made up after 40 steps, {err} left"
+            );
         }
     }
 
@@ -2170,7 +2207,9 @@ mod tests {
         // waits; the simulator, moved by the speeds sent, ends where it is.
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         f.set_signal(0, &[Signal::Stop]).unwrap();
-        let a = f.add_vehicle(t, None, None, body(), at(150.0, 10.0)).unwrap() as i64;
+        let a = f
+            .add_vehicle(t, None, None, body(), at(150.0, 10.0))
+            .unwrap() as i64;
         let mut sim = Sim::on_lane_10();
         let mut read = true;
         for _ in 0..3000 {
@@ -2179,7 +2218,11 @@ mod tests {
         let (_, want) = front_lane_pos(&f, a);
         assert!(f.state(a).unwrap().v_mps.abs() < 1e-3);
         assert_eq!(sim.speed, 0.0, "the simulator's speed is a standstill");
-        assert!((sim.pos - want).abs() < 1e-3, "simulator {} vs {want} after 300 s", sim.pos);
+        assert!(
+            (sim.pos - want).abs() < 1e-3,
+            "simulator {} vs {want} after 300 s",
+            sim.pos
+        );
         // The last speed sent was a creep of 4 mm/s (the end of a gentle
         // approach): the standstill is still sent, no drift for 100 s.
         sim.speed = 0.004;
@@ -2187,7 +2230,11 @@ mod tests {
         for _ in 0..1000 {
             read = sim_step(&mut f, a, &mut sim, read).read_position[0];
         }
-        assert!((sim.pos - want).abs() < 1e-3, "simulator drifted to {} vs {want}", sim.pos);
+        assert!(
+            (sim.pos - want).abs() < 1e-3,
+            "simulator drifted to {} vs {want}",
+            sim.pos
+        );
     }
 
     #[test]
@@ -2200,7 +2247,9 @@ mod tests {
             .map(|&x| f.add_vehicle(t, None, None, body(), at(x, 10.0)).unwrap() as i64)
             .collect();
         step(&mut f, &s, false);
-        let late = f.add_vehicle(t, None, None, body(), at(120.0, 10.0)).unwrap() as i64;
+        let late = f
+            .add_vehicle(t, None, None, body(), at(120.0, 10.0))
+            .unwrap() as i64;
         let all = [s[0], s[1], s[2], late];
         assert_eq!(f.lanes_with_followers(&all).unwrap(), vec![10]);
         let pos = |slot: i64| f.driven(slot).unwrap().known.unwrap().1;
@@ -2214,7 +2263,9 @@ mod tests {
         assert_eq!(got[2], None, "the leader's place is not known yet");
         assert_eq!(got[3], None, "first on its lane");
         // A list of another lane than the one blendtrack knows: nothing read off it.
-        let got = f.leaders_on_lanes(&all, &[11], &[vec![Some(s[0]), Some(s[1])]]).unwrap();
+        let got = f
+            .leaders_on_lanes(&all, &[11], &[vec![Some(s[0]), Some(s[1])]])
+            .unwrap();
         assert!(got.iter().all(Option::is_none));
         assert!(f.leaders_on_lanes(&all, &[10, 11], &[vec![]]).is_err());
     }
@@ -2223,9 +2274,27 @@ mod tests {
     fn piece_tables_with_bad_lane_positions_lengths_or_offsets_are_rejected() {
         let (_, route) = road(None, true);
         for (k, bad) in [
-            (0, Piece { lane_pos_start_m: -1.0, ..route.pieces[0] }),
-            (1, Piece { lane_length_m: 0.0, ..route.pieces[1] }),
-            (2, Piece { offset_m: f64::NAN, ..route.pieces[2] }),
+            (
+                0,
+                Piece {
+                    lane_pos_start_m: -1.0,
+                    ..route.pieces[0]
+                },
+            ),
+            (
+                1,
+                Piece {
+                    lane_length_m: 0.0,
+                    ..route.pieces[1]
+                },
+            ),
+            (
+                2,
+                Piece {
+                    offset_m: f64::NAN,
+                    ..route.pieces[2]
+                },
+            ),
         ] {
             let mut pieces = route.pieces.clone();
             pieces[k] = bad;

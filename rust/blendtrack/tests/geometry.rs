@@ -145,7 +145,10 @@ fn hinted_projection_catches_up_after_a_long_jump() {
     assert!((pr.s - 600.0).abs() < 1e-9, "the descent too: {pr:?}");
     // On a closed path it goes round the seam, both ways.
     let c = Path::circle(20.0, 1e-3).unwrap();
-    for (q, hint) in [(Point2::new(20.5, -0.3), 1.0), (Point2::new(20.5, 0.3), c.length() - 1.0)] {
+    for (q, hint) in [
+        (Point2::new(20.5, -0.3), 1.0),
+        (Point2::new(20.5, 0.3), c.length() - 1.0),
+    ] {
         let a = c.project_near(&q, hint);
         let b = c.project_brute_force(&q);
         assert!(c.arc_delta(a.s, b.s).abs() < 1e-9, "{a:?} vs {b:?}");
