@@ -36,6 +36,7 @@ import math
 import sys
 import tomllib
 from collections.abc import Callable
+from functools import partial
 from dataclasses import dataclass
 from pathlib import Path as FsPath
 from typing import Any
@@ -131,7 +132,8 @@ def reproduce(track_file: FsPath, out: FsPath, scale: float | None = None, tests
             jobs.append(
                 (
                     f"1/{label}/{'noise' if noisy else 'clean'}",
-                    lambda cfg=cfg, noisy=noisy: simulate(
+                    partial(
+                        simulate,
                         track,
                         cfg,
                         vehicle,
@@ -148,7 +150,8 @@ def reproduce(track_file: FsPath, out: FsPath, scale: float | None = None, tests
         jobs.append(
             (
                 f"2/moving/{'noise' if noisy else 'clean'}",
-                lambda noisy=noisy: simulate(
+                partial(
+                    simulate,
                     track,
                     sim_cfg,
                     vehicle,
@@ -166,7 +169,8 @@ def reproduce(track_file: FsPath, out: FsPath, scale: float | None = None, tests
         jobs.append(
             (
                 f"3/{t.name}",
-                lambda t=t: simulate(
+                partial(
+                    simulate,
                     loop,
                     t.config,
                     vehicle,
