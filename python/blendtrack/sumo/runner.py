@@ -57,6 +57,9 @@ from blendtrack import ControllerConfig, RouteFleet, VehicleParams
 from blendtrack.sumo.geometry import RouteGeometry, _via_chain, route_geometry
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 
+#: A vehicle's followers and leaders on the lane beside it: (gap m, speed m/s) each.
+_Neighbours = tuple[list[tuple[float, float]], list[tuple[float, float]]]
+
 #: vType parameter that marks a type as controlled.
 CONTROLLED_PARAM = "blendtrack.controlled"
 #: Prefix of per-vType parameter overrides, e.g. ``blendtrack.lat_blend_factor``.
@@ -1297,10 +1300,14 @@ class SumoRun:
         if not 0 <= target < lane.getEdge().getLaneNumber():
             return
         length = _change_length(speed, float(lane.getLength()) - pos - 1.0)
-        if length < 8.0 or not self._target_lane_clear(act.vid, direction, speed, length / speed):
+        if length < 8.0:
+            return
+        # Both checks of the target lane on one reading of it.
+        near = self._target_lane_neighbours(act.vid, direction)
+        if not self._target_lane_clear(act.vid, direction, speed, length / speed, near):
             return
         far = target + direction
-        if not self._tactical_room(act.vid, direction, speed, 1.0) or self._changing_into(edge, target, act.vid):
+        if not self._tactical_room(act.vid, direction, speed, 1.0, near) or self._changing_into(edge, target, act.vid):
             return
         if 0 <= far < lane.getEdge().getLaneNumber() and not self._far_lane_room(act.vid, f"{edge}_{far}", pos, speed):
             return
@@ -1332,19 +1339,16 @@ class SumoRun:
                     continue
         return False
 
-    def _tactical_room(self, vid: str, direction: int, speed: float, factor: float) -> bool:
+    def _tactical_room(self, vid: str, direction: int, speed: float, factor: float, near: _Neighbours | None = None) -> bool:
         """Gaps on the target lane for a change that is only wanted (see
         ``TACTICAL_HEADWAY_S``), the headway and braking terms scaled by
-        ``factor``: 1 to start, ``TACTICAL_KEEP_FACTOR`` to go on."""
-        v = self.sumo.vehicle
-        side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
-        for nid, gap in v.getNeighbors(vid, side):
-            if gap < _tactical_gap(float(v.getSpeed(nid)), speed, factor):
-                return False
-        for nid, gap in v.getNeighbors(vid, side | 2):
-            if gap < _tactical_gap(speed, float(v.getSpeed(nid)), factor):
-                return False
-        return True
+        ``factor``: 1 to start, ``TACTICAL_KEEP_FACTOR`` to go on. ``near``:
+        ``_target_lane_neighbours`` of this step, if read already."""
+        followers, leaders = near if near is not None else self._target_lane_neighbours(vid, direction)
+        return not (
+            any(gap < _tactical_gap(f_speed, speed, factor) for gap, f_speed in followers)
+            or any(gap < _tactical_gap(speed, l_speed, factor) for gap, l_speed in leaders)
+        )
 
     def _far_lane_room(self, vid: str, far_lane: str, front: float, speed: float) -> bool:
         """Gaps (``TACTICAL_KEEP_FACTOR`` of them) to the vehicles on the lane
@@ -1456,19 +1460,25 @@ class SumoRun:
         db = b[1] + max(float(speed(b[0])), 0.0) ** 2 / two_b
         return b if db < da else a
 
-    def _target_lane_clear(self, vid: str, direction: int, speed: float, duration: float) -> bool:
-        """Room on the target lane for a change lasting ``duration`` seconds:
-        the gap to the follower and to the leader there, each at least
-        ``LANE_CHANGE_GAP_M`` plus what the closing speed eats in that time."""
+    def _target_lane_neighbours(self, vid: str, direction: int) -> _Neighbours:
+        """SUMO's followers and leaders of ``vid`` on the lane beside it
+        (+1 left, -1 right), each as (gap in m, its speed in m/s)."""
         v = self.sumo.vehicle
         side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
-        for nid, gap in v.getNeighbors(vid, side):
-            if gap < LANE_CHANGE_GAP_M + duration * max(v.getSpeed(nid) - speed, 0.0):
-                return False
-        for nid, gap in v.getNeighbors(vid, side | 2):
-            if gap < LANE_CHANGE_GAP_M + duration * max(speed - v.getSpeed(nid), 0.0):
-                return False
-        return True
+        followers = [(gap, float(v.getSpeed(nid))) for nid, gap in v.getNeighbors(vid, side)]
+        leaders = [(gap, float(v.getSpeed(nid))) for nid, gap in v.getNeighbors(vid, side | 2)]
+        return followers, leaders
+
+    def _target_lane_clear(self, vid: str, direction: int, speed: float, duration: float, near: _Neighbours | None = None) -> bool:
+        """Room on the target lane for a change lasting ``duration`` seconds:
+        the gap to the follower and to the leader there, each at least
+        ``LANE_CHANGE_GAP_M`` plus what the closing speed eats in that time.
+        ``near``: ``_target_lane_neighbours`` of this step, if read already."""
+        followers, leaders = near if near is not None else self._target_lane_neighbours(vid, direction)
+        return not (
+            any(gap < LANE_CHANGE_GAP_M + duration * max(f_speed - speed, 0.0) for gap, f_speed in followers)
+            or any(gap < LANE_CHANGE_GAP_M + duration * max(speed - l_speed, 0.0) for gap, l_speed in leaders)
+        )
 
     def _abort_change(self, act: _Active) -> None:
         """Back to the lane the vehicle is on, the change pending again (it is
