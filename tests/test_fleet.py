@@ -131,3 +131,24 @@ def test_axle_errors_of_a_yawed_vehicle_on_a_straight() -> None:
     assert out["lateral_error_rear_m"][0] == pytest.approx(0.0, abs=1e-12)
     assert out["lateral_error_front_m"][0] == pytest.approx(front, rel=1e-12)
     assert out["lateral_error_m"][0] == pytest.approx(alpha * front, rel=1e-12)
+
+
+def test_soft_gap_is_braked_for_at_max_deceleration_at_most() -> None:
+    """Fleet.step's soft obstacle (a vehicle to line up behind): the same
+    standing vehicle 3 m ahead at 15 m/s is an emergency as a leader and a
+    b_f stop as a soft gap; where the law asks for less the two agree; a
+    soft column of the wrong length is refused by name."""
+    path = blendtrack.Path(np.column_stack([np.arange(0.0, 200.0), np.zeros(200)]))
+    fleet = blendtrack.Fleet()
+    cfg = blendtrack.ControllerConfig(preferred_speed=15.0)
+    slot = fleet.add_vehicle(fleet.add_track(path, cfg), cfg)
+
+    def accel(**obstacle: list[float]) -> float:
+        out = fleet.step([slot], [20.0], [0.0], [0.0], [15.0], [0.0], **obstacle)
+        return float(out["accel_mps2"][0])
+
+    assert accel(leader_gap=[3.0], leader_speed=[0.0]) < cfg.max_deceleration - 1.0
+    assert accel(soft_gap=[3.0], soft_speed=[0.0]) == cfg.max_deceleration
+    assert accel(soft_gap=[35.0], soft_speed=[0.0]) == accel(leader_gap=[35.0], leader_speed=[0.0]) > cfg.max_deceleration
+    with pytest.raises(blendtrack.InputError, match="soft_gap"):
+        accel(soft_gap=[3.0, 4.0])

@@ -200,6 +200,8 @@ class Fleet:
         stop_gap: _ArrayLike | None = None,
         speed_limit: _ArrayLike | None = None,
         dt: float | None = None,
+        soft_gap: _ArrayLike | None = None,
+        soft_speed: _ArrayLike | None = None,
     ) -> dict[str, npt.NDArray[Any]]: ...
 
 @final

@@ -138,8 +138,9 @@ impl Fleet {
     /// alpha, lateral_error_m, heading_error_rad, s_m, s_rear_m,
     /// lateral_error_rear_m, lateral_error_front_m (the axles' errors),
     /// curvature_per_m, virtual_obstacle_m, and with `dt` the next state x_m, y_m, theta_rad,
-    /// v_mps, delta_rad.
-    #[pyo3(signature = (slots, x, y, theta, v, delta, alpha = None, leader_gap = None, leader_speed = None, stop_gap = None, speed_limit = None, dt = None))]
+    /// v_mps, delta_rad. `soft_gap`/`soft_speed`: a vehicle to line up
+    /// behind, braked for at `max_deceleration` at most (a soft obstacle).
+    #[pyo3(signature = (slots, x, y, theta, v, delta, alpha = None, leader_gap = None, leader_speed = None, stop_gap = None, speed_limit = None, dt = None, soft_gap = None, soft_speed = None))]
     #[allow(clippy::too_many_arguments)]
     fn step<'py>(
         &mut self,
@@ -156,6 +157,8 @@ impl Fleet {
         stop_gap: Option<F64In<'py>>,
         speed_limit: Option<F64In<'py>>,
         dt: Option<f64>,
+        soft_gap: Option<F64In<'py>>,
+        soft_speed: Option<F64In<'py>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         if dt.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
             return Err(input_error(format!(
@@ -176,6 +179,8 @@ impl Fleet {
         let ls = leader_speed.as_ref().map(|a| slice(a));
         let sg = stop_gap.as_ref().map(|a| slice(a));
         let sp = speed_limit.as_ref().map(|a| slice(a));
+        let fg = soft_gap.as_ref().map(|a| slice(a));
+        let fs = soft_speed.as_ref().map(|a| slice(a));
         let inputs = FleetInputs {
             slots: &sl,
             x_m: &xs,
@@ -187,6 +192,8 @@ impl Fleet {
             leader_gap_m: lg.as_deref(),
             leader_speed_mps: ls.as_deref(),
             stop_gap_m: sg.as_deref(),
+            soft_gap_m: fg.as_deref(),
+            soft_speed_mps: fs.as_deref(),
             speed_limit_mps: sp.as_deref(),
             dt_s: dt,
         };

@@ -86,6 +86,11 @@ pub struct FleetInputs<'a> {
     pub leader_speed_mps: Option<&'a [f64]>,
     /// Gap to a stop line (m; NaN/inf = none).
     pub stop_gap_m: Option<&'a [f64]>,
+    /// Gap to a vehicle to line up behind (m; NaN/inf = none): a soft
+    /// obstacle ([`Obstacle::soft`]), braked for at `max_deceleration` at most.
+    pub soft_gap_m: Option<&'a [f64]>,
+    /// Its speed along the direction of travel (m/s; NaN = standing).
+    pub soft_speed_mps: Option<&'a [f64]>,
     /// Speed limit where the vehicle is (m/s; NaN/inf = none): the free-flow
     /// law aims at `min(preferred_speed, limit)`.
     pub speed_limit_mps: Option<&'a [f64]>,
@@ -114,6 +119,8 @@ impl<'a> FleetInputs<'a> {
             leader_gap_m: None,
             leader_speed_mps: None,
             stop_gap_m: None,
+            soft_gap_m: None,
+            soft_speed_mps: None,
             speed_limit_mps: None,
             dt_s: None,
         }
@@ -371,7 +378,7 @@ impl Fleet {
     /// Checks the call (lengths, slots, dt) before anything moves.
     fn check(&mut self, inp: &FleetInputs<'_>) -> Result<(), FleetError> {
         let n = inp.slots.len();
-        let cols: [(&'static str, Option<&[f64]>); 10] = [
+        let cols: [(&'static str, Option<&[f64]>); 12] = [
             ("x", Some(inp.x_m)),
             ("y", Some(inp.y_m)),
             ("theta", Some(inp.theta_rad)),
@@ -381,6 +388,8 @@ impl Fleet {
             ("leader_gap", inp.leader_gap_m),
             ("leader_speed", inp.leader_speed_mps),
             ("stop_gap", inp.stop_gap_m),
+            ("soft_gap", inp.soft_gap_m),
+            ("soft_speed", inp.soft_speed_mps),
             ("speed_limit", inp.speed_limit_mps),
         ];
         for (argument, col) in cols {
@@ -556,26 +565,22 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
     } else {
         a
     };
-    let mut obstacles = [Obstacle {
-        gap_m: 0.0,
-        speed_mps: 0.0,
-    }; 2];
+    let mut obstacles = [Obstacle::new(0.0, 0.0); 3];
     let mut n_obs = 0;
+    let speed = |v: f64| if v.is_finite() { v.max(0.0) } else { 0.0 };
     let gap = opt(inp.leader_gap_m);
     if gap.is_finite() {
-        let vl = opt(inp.leader_speed_mps);
-        obstacles[n_obs] = Obstacle {
-            gap_m: gap,
-            speed_mps: if vl.is_finite() { vl.max(0.0) } else { 0.0 },
-        };
+        obstacles[n_obs] = Obstacle::new(gap, speed(opt(inp.leader_speed_mps)));
+        n_obs += 1;
+    }
+    let soft = opt(inp.soft_gap_m);
+    if soft.is_finite() {
+        obstacles[n_obs] = Obstacle::soft(soft, speed(opt(inp.soft_speed_mps)));
         n_obs += 1;
     }
     let stop = opt(inp.stop_gap_m);
     if stop.is_finite() {
-        obstacles[n_obs] = Obstacle {
-            gap_m: stop,
-            speed_mps: 0.0,
-        };
+        obstacles[n_obs] = Obstacle::new(stop, 0.0);
         n_obs += 1;
     }
     let limit = opt(inp.speed_limit_mps);
@@ -712,10 +717,7 @@ mod tests {
             for i in 0..n {
                 let (c, p) = &mut singles[i];
                 let obs: Vec<Obstacle> = if i == 2 {
-                    vec![Obstacle {
-                        gap_m: 2.0,
-                        speed_mps: 1.0,
-                    }]
+                    vec![Obstacle::new(2.0, 1.0)]
                 } else {
                     vec![]
                 };

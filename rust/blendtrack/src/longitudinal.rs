@@ -24,6 +24,13 @@
 //!   triggers the emergency braking at b_l that the law falls back to when
 //!   `U < 0`. Followers that expect a leader to brake at most at its normal
 //!   deceleration (SUMO's car-following models) stay collision-free behind it.
+//!   A soft obstacle ([`Obstacle::soft`]) is bounded the same way.
+//!
+//! Note that the law is not monotone in the gap: just above the boundary of
+//! admissible plans (`U` = 0) it asks for `b_f / 2 - v / tau` (-18 m/s^2 at
+//! 16 m/s with the defaults, cut by the actuator), while just below it falls
+//! back to `b_l`. For a real obstacle that is the paper's law; for a soft one
+//! the bound at `b_f` makes it moot.
 
 use crate::config::ControllerConfig;
 use crate::path::Path;
@@ -34,13 +41,39 @@ fn cross(a: &Vector2<f64>, b: &Vector2<f64>) -> f64 {
     a.x * b.y - a.y * b.x
 }
 
-/// A real obstacle ahead on the path: a leader vehicle, a stop line.
+/// An obstacle ahead on the path: a leader vehicle, a stop line, or (soft)
+/// a vehicle to line up behind.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Obstacle {
     /// Bumper-to-bumper gap along the path (m).
     pub gap_m: f64,
     /// Its speed along the direction of travel (m/s, >= 0; 0 for a stop line).
     pub speed_mps: f64,
+    /// A comfort target rather than something in the way (a vehicle on the
+    /// lane beside, to line up behind before changing onto it): braking for
+    /// it is bounded below by `max_deceleration`, as for the virtual
+    /// obstacle, and never reaches the emergency `max_obs_deceleration`.
+    pub soft: bool,
+}
+
+impl Obstacle {
+    /// A real obstacle: the stopping law may brake at up to `max_obs_deceleration` for it.
+    pub fn new(gap_m: f64, speed_mps: f64) -> Self {
+        Obstacle {
+            gap_m,
+            speed_mps,
+            soft: false,
+        }
+    }
+
+    /// A soft obstacle (see the `soft` field): braking for it stops at `max_deceleration`.
+    pub fn soft(gap_m: f64, speed_mps: f64) -> Self {
+        Obstacle {
+            gap_m,
+            speed_mps,
+            soft: true,
+        }
+    }
 }
 
 /// IDM free-flow acceleration with the comfort bound of [`ControllerConfig::deceleration_factor`].
@@ -120,12 +153,19 @@ pub fn longitudinal_accel(
         .unwrap_or(f64::INFINITY);
     let mut a = free.min(virt);
     for o in obstacles {
-        if o.gap_m.is_finite() && o.speed_mps.is_finite() {
-            a = a.min(law(o.gap_m, o.speed_mps));
+        let r = if o.gap_m.is_finite() && o.speed_mps.is_finite() {
+            law(o.gap_m, o.speed_mps)
         } else if o.gap_m.is_nan() || o.speed_mps.is_nan() {
             // An obstacle we cannot read is treated as a wall right here.
-            a = a.min(cfg.max_obs_deceleration);
-        }
+            cfg.max_obs_deceleration
+        } else {
+            continue;
+        };
+        a = a.min(if o.soft {
+            r.max(cfg.max_deceleration)
+        } else {
+            r
+        });
     }
     LongitudinalOutput {
         accel_mps2: a,
@@ -627,43 +667,60 @@ mod tests {
         assert_eq!(stopping_accel(25.0, 5.0, 0.0, 0.0, 1.0, -4.0, -8.0), -8.0);
         let curve = longitudinal_accel(25.0, Some(5.0), &[], &cfg);
         assert_eq!(curve.accel_mps2, cfg.max_deceleration);
-        let wall = longitudinal_accel(
-            25.0,
-            None,
-            &[Obstacle {
-                gap_m: 5.0,
-                speed_mps: 0.0,
-            }],
-            &cfg,
-        );
+        let wall = longitudinal_accel(25.0, None, &[Obstacle::new(5.0, 0.0)], &cfg);
         assert_eq!(wall.accel_mps2, cfg.max_obs_deceleration);
         let leader = longitudinal_accel(
             3.0,
             None,
-            &[
-                Obstacle {
-                    gap_m: 3.0,
-                    speed_mps: 0.0,
-                },
-                Obstacle {
-                    gap_m: 50.0,
-                    speed_mps: 0.0,
-                },
-            ],
+            &[Obstacle::new(3.0, 0.0), Obstacle::new(50.0, 0.0)],
             &cfg,
         );
         let expected = stopping_accel(3.0, 3.0, 0.0, 0.0, 1.0, -4.0, -8.0);
         assert_eq!(leader.accel_mps2, expected);
-        let nan = longitudinal_accel(
-            3.0,
+        let nan = longitudinal_accel(3.0, None, &[Obstacle::new(f64::NAN, 0.0)], &cfg);
+        assert_eq!(nan.accel_mps2, cfg.max_obs_deceleration);
+    }
+
+    #[test]
+    fn soft_obstacles_are_braked_for_at_max_deceleration_at_most() {
+        // The law's boundary U = 0 in closed form: with tau = 1 s, b_f = b_l = -4,
+        // v = 16 m/s and a standing obstacle, gap* = s0 + (b_f b_l tau^2 + 4 b_l v tau)
+        // / (8 b_l) = 7.5 m, where the larger root is b_f / 2 - v / tau = -18.
+        let cfg = ControllerConfig {
+            max_obs_deceleration: -4.0,
+            ..Default::default()
+        };
+        let (v, tau, b) = (16.0, cfg.reaction_time, cfg.max_deceleration);
+        let boundary =
+            cfg.preferred_stop_dist + (b * b * tau * tau + 4.0 * b * v * tau) / (8.0 * b);
+        assert!((boundary - 7.5).abs() < 1e-12);
+        let at = |gap: f64, soft: bool| {
+            let o = if soft {
+                Obstacle::soft(gap, 0.0)
+            } else {
+                Obstacle::new(gap, 0.0)
+            };
+            longitudinal_accel(v, None, &[o], &cfg).accel_mps2
+        };
+        assert!((at(boundary, false) - (b / 2.0 - v / tau)).abs() < 1e-9);
+        // Not monotone for a real obstacle: a little closer, no plan, b_l.
+        assert_eq!(at(boundary - 0.1, false), cfg.max_obs_deceleration);
+        // A soft one never asks for more than b_f, at any gap or unreadable...
+        for gap in [-2.0, 0.0, 3.0, boundary, 12.0, 20.0, f64::NAN] {
+            assert_eq!(at(gap, true), cfg.max_deceleration, "gap {gap}");
+        }
+        // ...and where the law asks for less, it is the same as a real one.
+        assert!(at(40.0, true) > cfg.max_deceleration);
+        assert_eq!(at(40.0, true), at(40.0, false));
+        // A real obstacle beside a soft one still gets the full law.
+        let both = longitudinal_accel(
+            v,
             None,
-            &[Obstacle {
-                gap_m: f64::NAN,
-                speed_mps: 0.0,
-            }],
+            &[Obstacle::soft(3.0, 0.0), Obstacle::new(12.0, 0.0)],
             &cfg,
         );
-        assert_eq!(nan.accel_mps2, cfg.max_obs_deceleration);
+        assert_eq!(both.accel_mps2, at(12.0, false));
+        assert!(both.accel_mps2 < cfg.max_deceleration);
     }
 
     #[test]

@@ -76,7 +76,7 @@ proptest! {
         let vp = VehicleParams::default();
         let track = Arc::new(Track::new(path, &cfg));
         let mut ctrl = Controller::new(track, cfg, &vp).unwrap();
-        let obstacles: Vec<Obstacle> = gaps.into_iter().map(|(g, v)| Obstacle { gap_m: g, speed_mps: v }).collect();
+        let obstacles: Vec<Obstacle> = gaps.into_iter().map(|(g, v)| Obstacle::new(g, v)).collect();
         for st in states {
             let out = ctrl.step_with_alpha(&st, alpha, &obstacles).unwrap();
             prop_assert!(out.steering_rad.is_finite() && out.steering_rad.abs() <= vp.max_steering_rad() + 1e-12);
