@@ -174,3 +174,44 @@ def test_leaders_on_lanes_feed_the_next_plan_sumo_of_the_same_slots() -> None:
         f.plan_sumo(s, [None], lambda vid: 0.0, leader_index=[7])
     with pytest.raises(blendtrack.InputError, match="not a string"):
         f.leaders_on_lanes(s, lanes, [["c0", 3]])
+
+
+def test_plan_sumo_soft_leaders_are_braked_for_at_max_deceleration_at_most() -> None:
+    """A vehicle to line up behind on the lane beside (a merger's, or the
+    changer a courtesy follower lets in) comes on top of the own leader and
+    is braked for at the planning deceleration at most: given as the leader
+    instead, the same standing vehicle 3 m ahead at 15 m/s asks for far more
+    (the stopping law's emergency side)."""
+    cfg = blendtrack.ControllerConfig().replace(preferred_speed=15.0)
+    b_f = cfg.max_deceleration
+
+    def accel(leaders: list, soft: list | None) -> float:  # type: ignore[type-arg]
+        f, track = _fleet()
+        slot = f.add_vehicle(track, cfg, None, reach_m=3.5, length_m=4.5, min_gap_m=2.5, x=40.0, y=0.0, theta=0.0, v=15.0)
+        f.plan_sumo([slot], leaders, lambda vid: 0.0, soft_leaders=soft)
+        return float(f.step([], 0.1)["accel_mps2"][0])
+
+    free = accel([None], None)
+    as_leader = accel([("bg", 3.0)], None)
+    as_soft = accel([None], [(0, "bg", 3.0)])
+    assert as_leader < b_f - 1.0 and as_soft == pytest.approx(b_f, abs=1e-9) and free == 0.0
+    # Far enough that the law asks for less than b_f: the same either way.
+    assert accel([None], [(0, "bg", 35.0)]) == accel([("bg", 35.0)], None)
+    assert b_f < accel([None], [(0, "bg", 35.0)]) < free
+    # The own leader still counts in full beside a soft one.
+    assert accel([("bg", 3.0)], [(0, "other", 60.0)]) == as_leader
+    # No leader in SUMO's words (empty id, gap below -100 m): nothing.
+    assert accel([None], [(0, "", 3.0), (0, "bg", -101.0)]) == free
+
+
+@pytest.mark.parametrize(
+    "soft, match",
+    [([(0, "a")], r"soft_leaders\[0\] is not an \(index, id, gap\)"), ([(5, "a", 1.0)], "index 5"), ([(0, 7, 1.0)], r"soft_leaders\[0\]"), ([None], r"soft_leaders\[0\]")],
+)
+def test_plan_sumo_rejects_malformed_soft_leaders(soft, match) -> None:  # type: ignore[no-untyped-def]
+    f, track = _fleet()
+    s = [_add(f, track, 40.0, 10.0)]
+    with pytest.raises(blendtrack.InputError, match=match):
+        f.plan_sumo(s, [None], lambda vid: 0.0, soft_leaders=soft)
+    f.plan_sumo(s, [None], lambda vid: 0.0)
+    assert len(f.step([], 0.1)["move"]) == 1

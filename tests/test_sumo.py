@@ -261,6 +261,25 @@ def test_ramp_traffic_merges_with_every_vehicle_controlled(tmp_path: Path) -> No
     assert result.summary["collisions"] == 0 and _collisions(tmp_path) == []
 
 
+def test_a_merger_lines_up_without_emergency_braking(tmp_path: Path) -> None:
+    """The scenario's mix at demand x2, 300 s: a controlled merger waiting
+    for a gap lines up behind the target lane's vehicles as a soft obstacle,
+    braking at its planning deceleration at most. Given to the stopping law
+    as its leader instead (one alongside at gap 0, or just ahead), it braked
+    at the actuator's 9 m/s^2: SUMO logged five emergency brakings of
+    controlled ramp vehicles on the acceleration lane in these 300 s."""
+    sc = sumo.resolve_scenario("highway_onramp")
+    res = sumo.run_scenario(sc, RunOptions(end_s=300, sumo_args=("--scale", "2"), progress=False), tmp_path)
+    log = (tmp_path / "sumo" / "sumo.log").read_text()
+    # SUMO's warnings are on: the log has them (a controlled vehicle braking
+    # hard on the mainline for a merger cutting in, at 163 s, is one).
+    assert "performs emergency braking" in log
+    hard = [line for line in log.splitlines() if "performs emergency braking on lane 'hw_merge_0'" in line and "'auto_" in line]
+    assert res.summary["merge_lead_steps"] > 0
+    assert hard == [], hard[:3]
+    assert res.summary["collisions"] == 0 and _collisions(tmp_path) == []
+
+
 def test_the_tighter_of_two_leaders_is_the_one_the_stopping_law_brakes_harder_for() -> None:
     """A near leader pulling away matters less than a slow one further on:
     the choice is by gap plus braking distance at the planning deceleration

@@ -976,16 +976,13 @@ class SumoRun:
         read = [(i, vid) for vid in self._read_position if (i := index.get(vid)) is not None]
         lanes = [lane_id(get_lane(vid)) for _, vid in read]
         poss = [get_pos(vid) for _, vid in read]
-        if self._changing or self._courtesy or self._merge_leads:
+        if self._changing:
             assert asked is not None
             pos = {i: k for k, i in enumerate(asked)}
-            if self._changing:
-                # The lane changers' leaders need SUMO's word (and a look at the target lane).
-                for act in self._changing.values():
-                    self._ask_leader(index[act.vid], pos, asked, leaders)
-                self._changing_leaders(leaders, pos)
-            if self._courtesy or self._merge_leads:
-                self._extra_leaders(leaders, pos, asked)
+            # The lane changers' leaders need SUMO's word (and a look at the target lane).
+            for act in self._changing.values():
+                self._ask_leader(index[act.vid], pos, asked, leaders)
+            self._changing_leaders(leaders, pos)
         return (asked, leaders), [i for i, _ in read], lanes, poss
 
     def _ask_leader(self, i: int, pos: dict[int, int], asked: list[int], leaders: list[Any]) -> int:
@@ -1033,8 +1030,6 @@ class SumoRun:
         lanes = [lane_id(r.get(tc.VAR_LANE_ID, "")) for r in rows]
         poss = [float(r.get(tc.VAR_LANEPOSITION, math.nan)) for r in rows]
         self._changing_leaders(leaders, None)
-        if self._courtesy or self._merge_leads:
-            self._extra_leaders(leaders, None, None)
         return (None, leaders), list(range(len(rows))), lanes, poss
 
     def _changing_leaders(self, leaders: list[Any], pos: dict[int, int] | None) -> None:
@@ -1113,7 +1108,8 @@ class SumoRun:
         if not self._ids:
             return
         ids, order, fleet = self._ids, self._order, self.fleet
-        queries = fleet.plan_sumo(self._slots, leaders, self._get_speed, read, lanes, poss, asked).tolist()
+        soft = self._soft_leaders() if self._courtesy or self._merge_leads else None
+        queries = fleet.plan_sumo(self._slots, leaders, self._get_speed, read, lanes, poss, asked, soft).tolist()
         answers = [self._must_yield(ids[i], order[i].slot) for i in queries]
         out = fleet.step(np.array(answers, dtype=bool), self.dt)
         self._apply(t, ids, order, out)
@@ -1420,30 +1416,28 @@ class SumoRun:
                     self._courtesy[fid] = (vid, gap)
                 return
 
-    def _extra_leaders(self, leaders: list[Any], pos: dict[int, int] | None, asked: list[int] | None) -> None:
-        """This step's extra leaders: a courtesy follower's is the lane
-        changer it gives way to, a waiting changer's the vehicle it lines up
-        behind. Each replaces the vehicle's own leader where the stopping law
-        brakes harder for it (``leaders`` and ``pos`` as in
-        ``_changing_leaders``; a vehicle not yet asked is added to ``asked``)."""
+    def _soft_leaders(self) -> list[tuple[int, str, float]]:
+        """This step's vehicles to line up behind, as ``plan_sumo``'s
+        ``soft_leaders``: a courtesy follower's is the lane changer it gives
+        way to, a waiting changer's the vehicle it lines up behind. Each comes
+        on top of the vehicle's own leader, as a soft obstacle: the vehicle
+        falls back for it braking at ``max_deceleration`` at most, never as in
+        an emergency (it is on another lane). As a leader in its place, one
+        alongside (gap 0) had the merger braking at the actuator's 9 m/s^2
+        (traced: 26 steps at the limit in the mix at demand x2, SUMO's
+        emergency-braking warnings), and it dropped the own leader."""
         index = self._index
-        extra = [(fid, cid, gap, True) for fid, (cid, gap) in self._courtesy.items()]
-        extra += [(vid, nid, gap, False) for vid, (nid, gap) in self._merge_leads.items()]
-        for fid, cid, gap, courtesy in extra:
-            i = index.get(fid)
-            if i is None or (courtesy and cid not in index):
-                continue
-            if pos is None:
-                k = i
-            else:
-                assert asked is not None
-                k = self._ask_leader(i, pos, asked, leaders)
-            lead = self._tighter_leader(leaders[k], (cid, gap))
-            if lead[0] == cid:
-                leaders[k] = lead
-                self.counts["courtesy_steps" if courtesy else "merge_lead_steps"] += 1
+        soft = [(index.get(fid), cid, gap, "courtesy_steps") for fid, (cid, gap) in self._courtesy.items() if cid in index]
+        soft += [(index.get(vid), nid, gap, "merge_lead_steps") for vid, (nid, gap) in self._merge_leads.items()]
         self._courtesy = {}
         self._merge_leads = {}
+        chosen: dict[int, tuple[str, float]] = {}
+        for i, cid, gap, count in soft:
+            if i is not None:
+                # One per vehicle: of a courtesy and a lining-up target, the tighter.
+                chosen[i] = self._tighter_leader(chosen.get(i), (cid, gap))
+                self.counts[count] += 1
+        return [(i, cid, gap) for i, (cid, gap) in chosen.items()]
 
     def _tighter_leader(self, a: Any, b: tuple[str, float]) -> Any:
         """Of two leaders (SUMO's ``(id, gap)``; ``a`` may be None or empty),

@@ -12,7 +12,7 @@ use crate::errors::{config_error, fleet_error, input_error};
 use crate::path::Path;
 use blendtrack::traffic::{
     Body, LaneChangeDue, Move, Observations, Piece, Route, RouteFleet as CoreRouteFleet, Signal,
-    StopLine, TrafficError, TrafficSettings,
+    SoftLeaders, StopLine, TrafficError, TrafficSettings,
 };
 use blendtrack::VehicleState;
 use numpy::ndarray::Array2;
@@ -452,6 +452,7 @@ impl RouteFleet {
             leader_speed_mps: &lv,
             lane: &ln,
             lane_pos_m: &lp,
+            soft: None,
         };
         self.run_plan(py, &obs)
     }
@@ -467,7 +468,11 @@ impl RouteFleet {
     /// With `leader_index`, `leaders` holds only the entries at those indices
     /// (the ones `leaders_on_lanes` could not read off the lane lists, for
     /// these same `slots`); the others are the ones it found.
-    #[pyo3(signature = (slots, leaders, speed_of, read_index = None, read_lane = None, read_pos = None, leader_index = None))]
+    ///
+    /// `soft_leaders`: `(index into slots, id, gap)` of vehicles to line up
+    /// behind besides the leader (a soft obstacle: braked for at
+    /// `max_deceleration` at most); ids and gaps read as the leaders'.
+    #[pyo3(signature = (slots, leaders, speed_of, read_index = None, read_lane = None, read_pos = None, leader_index = None, soft_leaders = None))]
     #[allow(clippy::too_many_arguments)]
     fn plan_sumo<'py>(
         &mut self,
@@ -479,10 +484,15 @@ impl RouteFleet {
         read_lane: Option<I64In<'py>>,
         read_pos: Option<F64In<'py>>,
         leader_index: Option<I64In<'py>>,
+        soft_leaders: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyArray1<i64>>> {
         let sl = vec_of(&slots);
         let n = sl.len();
         let items: Vec<Bound<'py, PyAny>> = leaders.try_iter()?.collect::<PyResult<_>>()?;
+        let soft = match soft_leaders {
+            Some(list) => Some(self.soft_leaders(list, n, speed_of)?),
+            None => None,
+        };
         let mut gaps = vec![f64::NAN; n];
         let mut lslots = vec![-1i64; n];
         let mut lspeeds = vec![f64::NAN; n];
@@ -548,19 +558,8 @@ impl RouteFleet {
                 .get_item(1)?
                 .extract()
                 .map_err(|_| input_error(format!("leaders[{k}]: the gap is not a number")))?;
-            let name = id.to_str()?;
-            if name.is_empty() || !(gap >= -100.0) {
-                continue;
-            }
-            gaps[i] = gap;
-            match self.slot_of.get(name) {
-                Some(&s) => lslots[i] = s,
-                None => {
-                    lspeeds[i] = speed_of
-                        .call1((id,))
-                        .and_then(|v| v.extract::<f64>())
-                        .unwrap_or(f64::NAN);
-                }
+            if let Some((slot, speed)) = self.leader_of(id, gap, speed_of)? {
+                (gaps[i], lslots[i], lspeeds[i]) = (gap, slot, speed);
             }
         }
         let mut ln = vec![-1i64; n];
@@ -584,6 +583,11 @@ impl RouteFleet {
             leader_speed_mps: &lspeeds,
             lane: &ln,
             lane_pos_m: &lp,
+            soft: soft.as_ref().map(|(g, s, v)| SoftLeaders {
+                gap_m: g,
+                slot: s,
+                speed_mps: v,
+            }),
         };
         self.run_plan(py, &obs)
     }
@@ -766,6 +770,68 @@ impl RouteFleet {
 
 impl RouteFleet {
     /// The core's plan with the interpreter released; the query indices as an array.
+    /// `plan_sumo`'s `soft_leaders` as columns (gap, slot, speed) over `n` slots.
+    fn soft_leaders(
+        &self,
+        list: &Bound<'_, PyAny>,
+        n: usize,
+        speed_of: &Bound<'_, PyAny>,
+    ) -> PyResult<(Vec<f64>, Vec<i64>, Vec<f64>)> {
+        let mut gaps = vec![f64::NAN; n];
+        let mut slots = vec![-1i64; n];
+        let mut speeds = vec![f64::NAN; n];
+        for (k, item) in list.try_iter()?.enumerate() {
+            let item = item?;
+            let bad = || {
+                input_error(format!(
+                    "soft_leaders[{k}] is not an (index, id, gap) tuple"
+                ))
+            };
+            let t = item.cast::<PyTuple>().map_err(|_| bad())?;
+            if t.len() != 3 {
+                return Err(bad());
+            }
+            let i: i64 = t.get_item(0)?.extract().map_err(|_| bad())?;
+            let i = usize::try_from(i).ok().filter(|&i| i < n).ok_or_else(|| {
+                input_error(format!(
+                    "soft_leaders[{k}]: index {i} is not an index into slots"
+                ))
+            })?;
+            let id = t.get_item(1)?;
+            let id = id.cast::<PyString>().map_err(|_| bad())?;
+            let gap: f64 = t.get_item(2)?.extract().map_err(|_| bad())?;
+            if let Some((slot, speed)) = self.leader_of(id, gap, speed_of)? {
+                (gaps[i], slots[i], speeds[i]) = (gap, slot, speed);
+            }
+        }
+        Ok((gaps, slots, speeds))
+    }
+
+    /// A leader as SUMO names it: None if it is no leader (empty id, gap
+    /// below -100 m), else (its slot, -1 if not driven here; its speed, NaN
+    /// if driven here or unreadable).
+    fn leader_of(
+        &self,
+        id: &Bound<'_, PyString>,
+        gap: f64,
+        speed_of: &Bound<'_, PyAny>,
+    ) -> PyResult<Option<(i64, f64)>> {
+        let name = id.to_str()?;
+        if name.is_empty() || !(gap >= -100.0) {
+            return Ok(None);
+        }
+        Ok(Some(match self.slot_of.get(name) {
+            Some(&s) => (s, f64::NAN),
+            None => (
+                -1,
+                speed_of
+                    .call1((id,))
+                    .and_then(|v| v.extract::<f64>())
+                    .unwrap_or(f64::NAN),
+            ),
+        }))
+    }
+
     fn run_plan<'py>(
         &mut self,
         py: Python<'py>,

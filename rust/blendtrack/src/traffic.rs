@@ -513,6 +513,22 @@ pub struct Observations<'a> {
     /// read them (`lane` < 0 where not read).
     pub lane: &'a [i64],
     pub lane_pos_m: &'a [f64],
+    /// Vehicles to line up behind, beside the leader (None: nobody has one).
+    pub soft: Option<SoftLeaders<'a>>,
+}
+
+/// A vehicle each slot lines up behind without it being in the way: one on
+/// the lane beside, ahead of a vehicle that waits to change onto that lane
+/// (or one that is to be let in). Columns as the leader's in
+/// [`Observations`], one entry per slot (gap NaN = none). Braking for it is
+/// bounded at `max_deceleration` (a soft [`crate::Obstacle`]): the vehicle
+/// falls back at most at its planning deceleration and never brakes as in an
+/// emergency for a vehicle that is not on its lane.
+#[derive(Debug, Clone, Copy)]
+pub struct SoftLeaders<'a> {
+    pub gap_m: &'a [f64],
+    pub slot: &'a [i64],
+    pub speed_mps: &'a [f64],
 }
 
 #[derive(Debug, Clone, Default)]
@@ -521,6 +537,8 @@ struct Plan {
     leader_gap: Vec<f64>,
     leader_speed: Vec<f64>,
     stop_gap: Vec<f64>,
+    soft_gap: Vec<f64>,
+    soft_speed: Vec<f64>,
     limit: Vec<f64>,
     /// Gap to the stop line of a link that waits for the simulator's word on foes.
     yield_gap: Vec<f64>,
@@ -935,6 +953,16 @@ impl RouteFleet {
         std::mem::take(&mut self.samples)
     }
 
+    /// A leader's speed: its state's where it is driven here (`slot` >= 0),
+    /// else `given`.
+    fn speed_of(&self, slot: i64, given: f64) -> f64 {
+        usize::try_from(slot)
+            .ok()
+            .and_then(|l| self.driven.get(l))
+            .and_then(Option::as_ref)
+            .map_or(given, |d| d.state.v_mps)
+    }
+
     /// First half of a step: stop lines and leaders. Returns the indices (into
     /// `obs.slots`) of the vehicles approaching a link without priority:
     /// [`RouteFleet::step`] needs, for each, whether it must give way.
@@ -945,6 +973,11 @@ impl RouteFleet {
         check_len("leader_speed", n, obs.leader_speed_mps.len())?;
         check_len("lane", n, obs.lane.len())?;
         check_len("lane_pos", n, obs.lane_pos_m.len())?;
+        if let Some(sl) = &obs.soft {
+            check_len("soft_gap", n, sl.gap_m.len())?;
+            check_len("soft_slot", n, sl.slot.len())?;
+            check_len("soft_speed", n, sl.speed_mps.len())?;
+        }
         let mut seen = vec![false; self.driven.len()];
         for &slot in obs.slots {
             self.driven(slot)?;
@@ -959,6 +992,8 @@ impl RouteFleet {
             leader_gap: vec![f64::NAN; n],
             leader_speed: vec![f64::NAN; n],
             stop_gap: vec![f64::NAN; n],
+            soft_gap: vec![f64::NAN; n],
+            soft_speed: vec![f64::NAN; n],
             limit: vec![f64::NAN; n],
             yield_gap: vec![f64::NAN; n],
             queries: Vec::new(),
@@ -970,13 +1005,13 @@ impl RouteFleet {
                 // The simulator's gap leaves out minGap, and the simulator
                 // counts anything closer as a collision: stop further back.
                 plan.leader_gap[i] = gap - margin;
-                let ls = obs.leader_slot[i];
-                let from_slot = usize::try_from(ls)
-                    .ok()
-                    .and_then(|l| self.driven.get(l))
-                    .and_then(Option::as_ref)
-                    .map(|d| d.state.v_mps);
-                plan.leader_speed[i] = from_slot.unwrap_or(obs.leader_speed_mps[i]);
+                plan.leader_speed[i] = self.speed_of(obs.leader_slot[i], obs.leader_speed_mps[i]);
+            }
+            if let Some(sl) = &obs.soft {
+                if sl.gap_m[i].is_finite() {
+                    plan.soft_gap[i] = sl.gap_m[i] - margin;
+                    plan.soft_speed[i] = self.speed_of(sl.slot[i], sl.speed_mps[i]);
+                }
             }
             let cfg = self.fleet.vehicle_config(slot as i64)?;
             let d = self.driven[slot].as_ref().expect("checked above");
@@ -1131,6 +1166,8 @@ impl RouteFleet {
             leader_gap_m: Some(&plan.leader_gap),
             leader_speed_mps: Some(&plan.leader_speed),
             stop_gap_m: Some(&plan.stop_gap),
+            soft_gap_m: Some(&plan.soft_gap),
+            soft_speed_mps: Some(&plan.soft_speed),
             speed_limit_mps: Some(&plan.limit),
             dt_s: Some(dt_s),
             ..FleetInputs::new(
@@ -1451,6 +1488,7 @@ mod tests {
                 leader_speed_mps: &nan,
                 lane: &vec![-1; n],
                 lane_pos_m: &nan,
+                soft: None,
             })
             .unwrap();
         let out = f.step(&vec![yield_to; q.len()], DT).unwrap();
@@ -1644,6 +1682,7 @@ mod tests {
                 leader_speed_mps: &[0.0],
                 lane: &[-1],
                 lane_pos_m: &[f64::NAN],
+                soft: None,
             })
             .unwrap();
             f.step(&[], DT).unwrap();
@@ -1673,6 +1712,7 @@ mod tests {
                 leader_speed_mps: &[f64::NAN],
                 lane: &[-1],
                 lane_pos_m: &[f64::NAN],
+                soft: None,
             })
             .unwrap();
             g.step(&[], DT).unwrap().accel_mps2[0]
@@ -1741,6 +1781,7 @@ mod tests {
                 leader_speed_mps: &[f64::NAN],
                 lane: &[10],
                 lane_pos_m: &[pos],
+                soft: None,
             })
             .unwrap();
         };
@@ -1924,6 +1965,7 @@ mod tests {
             leader_speed_mps: &[f64::NAN, f64::NAN][..slots.len()],
             lane: &[-1, -1][..slots.len()],
             lane_pos_m: &[f64::NAN, f64::NAN][..slots.len()],
+            soft: None,
         };
         assert!(matches!(
             f.plan(&obs(&[7])),
@@ -2030,6 +2072,7 @@ mod tests {
             leader_speed_mps: &[f64::NAN],
             lane: &[lane],
             lane_pos_m: &[pos],
+            soft: None,
         })
         .unwrap();
         let out = f.step(&[], DT).unwrap();
