@@ -261,21 +261,24 @@ def test_ramp_traffic_merges_with_every_vehicle_controlled(tmp_path: Path) -> No
     assert result.summary["collisions"] == 0 and _collisions(tmp_path) == []
 
 
-def test_a_merger_lines_up_without_emergency_braking(tmp_path: Path) -> None:
-    """The scenario's mix at demand x2, 300 s: a controlled merger waiting
-    for a gap lines up behind the target lane's vehicles as a soft obstacle,
-    braking at its planning deceleration at most. Given to the stopping law
-    as its leader instead (one alongside at gap 0, or just ahead), it braked
-    at the actuator's 9 m/s^2: SUMO logged five emergency brakings of
-    controlled ramp vehicles on the acceleration lane in these 300 s."""
+def test_mergers_line_up_and_change_lanes_without_emergency_braking(tmp_path: Path) -> None:
+    """The scenario's mix at demand x2, 300 s: SUMO logs no emergency
+    braking at all. Two causes, each traced and fixed:
+    - a merger waiting for a gap had the target lane's vehicle (alongside at
+      gap 0, or just ahead) as its leader: the stopping law braked at the
+      actuator's 9 m/s^2 (5 warnings for controlled ramp vehicles on the
+      acceleration lane); it is a soft obstacle now;
+    - a merger kept braking during its change for a vehicle standing at the
+      end of the acceleration lane that the change took it clear of (9.5 to
+      4.3 m/s), and the controlled follower on the target lane braked at
+      9 m/s^2 when it cut in (at 163 s); that leader is left behind now."""
     sc = sumo.resolve_scenario("highway_onramp")
     res = sumo.run_scenario(sc, RunOptions(end_s=300, sumo_args=("--scale", "2"), progress=False), tmp_path)
     log = (tmp_path / "sumo" / "sumo.log").read_text()
-    # SUMO's warnings are on: the log has them (a controlled vehicle braking
-    # hard on the mainline for a merger cutting in, at 163 s, is one).
-    assert "performs emergency braking" in log
-    hard = [line for line in log.splitlines() if "performs emergency braking on lane 'hw_merge_0'" in line and "'auto_" in line]
+    assert "Simulation version" in log  # SUMO wrote its log, warnings on
+    hard = [line for line in log.splitlines() if "performs emergency braking" in line]
     assert res.summary["merge_lead_steps"] > 0
+    assert sum(int(r["lane_changes"]) for r in _read_vehicles(tmp_path)) >= 10
     assert hard == [], hard[:3]
     assert res.summary["collisions"] == 0 and _collisions(tmp_path) == []
 
