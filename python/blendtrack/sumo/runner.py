@@ -1095,7 +1095,10 @@ class SumoRun:
         lane_id = v.getLaneID(vid)
         edge = lane_id.rpartition("_")[0]
         net = self._net_geometry()
-        spacing = 0.5 * (float(net.getLane(lane_id).getWidth()) + float(net.getLane(f"{edge}_{act.changing[1]}").getWidth()))
+        try:
+            spacing = 0.5 * (float(net.getLane(lane_id).getWidth()) + float(net.getLane(f"{edge}_{act.changing[1]}").getWidth()))
+        except (KeyError, AttributeError):
+            return False  # not on the edge the change is on (a junction lane): the leader counts
         # Where the front axle is when the front bumper reaches the leader's
         # back (SUMO's gap leaves out minGap): the offset the change has there.
         back = float(v.getLanePosition(vid)) + gap + float(v.getMinGap(vid))
