@@ -1096,12 +1096,15 @@ class SumoRun:
         edge = lane_id.rpartition("_")[0]
         net = self._net_geometry()
         try:
-            spacing = 0.5 * (float(net.getLane(lane_id).getWidth()) + float(net.getLane(f"{edge}_{act.changing[1]}").getWidth()))
+            lane = net.getLane(lane_id)
+            spacing = 0.5 * (float(lane.getWidth()) + float(net.getLane(f"{edge}_{act.changing[1]}").getWidth()))
         except (KeyError, AttributeError):
             return False  # not on the edge the change is on (a junction lane): the leader counts
         # Where the front axle is when the front bumper reaches the leader's
         # back (SUMO's gap leaves out minGap): the offset the change has there.
         back = float(v.getLanePosition(vid)) + gap + float(v.getMinGap(vid))
+        if back > float(lane.getLength()):
+            return False  # beyond this lane: where lanes merge it may be ahead on the target lane too
         u = min(max((back - CHANGE_AXLE_BEHIND_M - start) / max(length, 1e-6), 0.0), 1.0)
         offset = spacing * u * u * (3.0 - 2.0 * u)
         return offset >= 0.5 * (float(v.getWidth(vid)) + float(v.getWidth(lid))) + LANE_CHANGE_CLEAR_M
