@@ -373,7 +373,8 @@ def _add_driving_options(parser: argparse.ArgumentParser) -> None:
         "--tactical-lane-changes",
         action="store_true",
         help="controlled vehicles also change lanes where their route does not need it, when SUMO's lane-change model "
-        "would (to overtake, keep right, make room) and the target lane has room (default: only the changes the route needs)",
+        "would (to overtake, keep right, make room) and the target lane has room (default: only the changes the route needs). "
+        "Experimental: on the urban grid it leads to junction collisions on some seeds (README, known limits)",
     )
 
 
