@@ -183,6 +183,31 @@ def test_grid_waits_for_a_vehicle_standing_inside_the_junction(tmp_path: Path) -
     assert sum(r.reason == "arrived" for r in result.records) > 50, "traffic flows"
 
 
+def test_left_turners_look_far_enough_for_oncoming_traffic(tmp_path: Path) -> None:
+    """Every vehicle controlled, tactical lane changes on, seed 1: at C1 a
+    left turner 30 m from its waiting point at 12.6 m/s looked for oncoming
+    foes only 4 s ahead, went on, reached the point too fast to stop and was
+    hit by a straight-on vehicle 5.7 s away (81.6 s, and another at 89.3 s).
+    Deciding at the entry for the point it reaches later, it now looks as
+    far ahead as it needs to get there, on top of the 4 s."""
+    sc = sumo.resolve_scenario("urban_grid")
+    res = sumo.run_scenario(sc, RunOptions(end_s=100, seed=1, controlled_fraction=1.0, tactical_lane_changes=True, progress=False), tmp_path)
+    assert res.summary["controlled_vehicles"] > 100
+    assert res.summary["collisions"] == 0 and _collisions(tmp_path) == []
+
+
+def test_a_foe_too_close_to_stop_at_its_yellow_is_waited_for(tmp_path: Path) -> None:
+    """30 % controlled, seed 0: a controlled left turner at its waiting point
+    at B0 went when the oncoming light turned yellow, taking every foe there
+    to stop, and a controlled vehicle 23 m from its line at 13.8 m/s, too
+    close to stop, drove through into it (179.8 s). A yellow foe now counts
+    unless it can stop at 3 m/s^2 after 1 s."""
+    sc = sumo.resolve_scenario("urban_grid")
+    res = sumo.run_scenario(sc, RunOptions(end_s=200, seed=0, controlled_fraction=0.3, progress=False), tmp_path)
+    assert res.summary["controlled_vehicles"] > 50
+    assert res.summary["collisions"] == 0 and _collisions(tmp_path) == []
+
+
 def test_obstacle_is_assumed_to_brake_like_the_vehicle_unless_set(tmp_path: Path) -> None:
     """In SUMO runs max_obs_deceleration defaults to the vehicle's own
     max_deceleration (not the paper's -8); a value the user set is kept."""
