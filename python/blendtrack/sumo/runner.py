@@ -291,8 +291,8 @@ class RunOptions:
     #: it, when SUMO's lane-change model would (to overtake, keep right or
     #: make room): see ``TACTICAL_CHECK_EVERY``. Off by default: only the
     #: changes the route needs (see the README for what it does to a merge).
-    #: Experimental: on the urban grid it leads to junction collisions on
-    #: some seeds (README, known limits).
+    #: Experimental: tried on 2 networks and 3 seeds; on the urban grid it
+    #: adds teleports (README, known limits).
     tactical_lane_changes: bool = False
 
     def __post_init__(self) -> None:
