@@ -1163,10 +1163,12 @@ class SumoRun:
         if self._has_tls:
             self._refresh_tls()
         (asked, leaders), read, lanes, poss = self._observe(t)
+        # This step's courtesy and lining-up targets are taken (and cleared)
+        # even when no controlled vehicle is left to step.
+        soft = self._soft_leaders() if self._courtesy or self._merge_leads else None
         if not self._ids:
             return
         ids, order, fleet = self._ids, self._order, self.fleet
-        soft = self._soft_leaders() if self._courtesy or self._merge_leads else None
         queries = fleet.plan_sumo(self._slots, leaders, self._get_speed, read, lanes, poss, asked, soft).tolist()
         answers = [self._must_yield(ids[i], order[i].slot) for i in queries]
         out = fleet.step(np.array(answers, dtype=bool), self.dt)

@@ -769,7 +769,6 @@ impl RouteFleet {
 }
 
 impl RouteFleet {
-    /// The core's plan with the interpreter released; the query indices as an array.
     /// `plan_sumo`'s `soft_leaders` as columns (gap, slot, speed) over `n` slots.
     fn soft_leaders(
         &self,
@@ -832,6 +831,7 @@ impl RouteFleet {
         }))
     }
 
+    /// The core's plan with the interpreter released; the query indices as an array.
     fn run_plan<'py>(
         &mut self,
         py: Python<'py>,
