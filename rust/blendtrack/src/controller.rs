@@ -169,6 +169,15 @@ impl Controller {
         obstacles: &[Obstacle],
     ) -> Result<ControlOutput, StateError> {
         measured.check_finite()?;
+        for (name, value) in [("x_m", measured.x_m), ("y_m", measured.y_m)] {
+            if value.abs() > crate::limits::MAX_COORDINATE_M {
+                return Err(StateError::Parameter {
+                    name,
+                    value,
+                    message: "position beyond 1e9 m: too far out for f64 to resolve the path",
+                });
+            }
+        }
         if !(0.0..=1.0).contains(&alpha) {
             return Err(StateError::Parameter {
                 name: "alpha",
@@ -262,6 +271,16 @@ impl Controller {
             .corridor
             .ray_cast_along(path, &rear_pt, &u, rear.s, horizon);
         let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
+        // A finite state within range gives a finite command; should a
+        // corner of the geometry still overflow, say so rather than return NaN.
+        for (field, value) in [
+            ("steering command", steering),
+            ("acceleration command", lon.accel_mps2),
+        ] {
+            if !value.is_finite() {
+                return Err(StateError::NonFinite { field, value });
+            }
+        }
         Ok(ControlOutput {
             steering_rad: steering,
             accel_mps2: lon.accel_mps2,

@@ -19,6 +19,13 @@ pub enum PathError {
         what: &'static str,
         value: f64,
     },
+    /// A coordinate is beyond [`crate::limits::MAX_COORDINATE_M`].
+    #[error("{location}: {what} = {} is beyond +-1e9 m, where f64 cannot resolve offsets of metres", crate::limits::fmt_number(*value))]
+    TooFar {
+        location: String,
+        what: &'static str,
+        value: f64,
+    },
     /// A width is negative.
     #[error("{location}: {what} must be >= 0, got {value}")]
     NegativeWidth {
@@ -39,8 +46,16 @@ pub enum PathError {
     /// A track file could not be read.
     #[error("cannot read track file {file}: {message}")]
     Io { file: String, message: String },
+    /// A generator would produce more points than [`crate::limits::MAX_PATH_POINTS`].
+    #[error("{name} = {}: {} points, more than the limit of {limit} (raise the spacing or shorten the path)", crate::limits::fmt_number(*value), crate::limits::fmt_number(*points))]
+    TooManyPoints {
+        name: &'static str,
+        value: f64,
+        points: f64,
+        limit: usize,
+    },
     /// A generator parameter is out of range.
-    #[error("invalid path parameter {name} = {value}: {message}")]
+    #[error("invalid path parameter {name} = {}: {message}", crate::limits::fmt_number(*value))]
     Parameter {
         name: &'static str,
         value: f64,
@@ -88,11 +103,18 @@ impl ConfigError {
 pub enum StateError {
     #[error("vehicle state field `{field}` is not finite ({value})")]
     NonFinite { field: &'static str, value: f64 },
-    #[error("simulation parameter `{name}` = {value}: {message}")]
+    #[error("simulation parameter `{name}` = {}: {message}", crate::limits::fmt_number(*value))]
     Parameter {
         name: &'static str,
         value: f64,
         message: &'static str,
+    },
+    /// A run would need more memory than a limit of [`crate::limits`] allows.
+    #[error("simulation parameter `{name}` = {}: {message}", crate::limits::fmt_number(*value))]
+    TooLarge {
+        name: &'static str,
+        value: f64,
+        message: String,
     },
 }
 

@@ -26,6 +26,7 @@ pub mod controller;
 pub mod error;
 pub mod fleet;
 pub mod lateral;
+pub mod limits;
 pub mod longitudinal;
 pub mod metrics;
 pub mod path;

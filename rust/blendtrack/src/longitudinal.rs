@@ -405,6 +405,9 @@ impl Border {
     }
 }
 
+/// Exits closer than this (m) are the ray's origin touching the border.
+const BORDER_TOUCH_M: f64 = 1e-9;
+
 /// Ray parameter at which the ray `o + t u` leaves the corridor through the
 /// border segment from `a` along `e` (`leaving_sign` +1 for a left border, -1 for a right one).
 #[inline]
@@ -423,7 +426,11 @@ fn segment_exit(
     let ao = a - o;
     let t = cross(&ao, e) / denom;
     let lam = cross(&ao, u) / denom;
-    if t >= 0.0 && (0.0..=1.0).contains(&lam) {
+    // A ray starting on the border (t = 0 up to rounding) is not leaving
+    // the corridor ahead: counted, it would be an obstacle at distance 0 that
+    // holds a standing vehicle on the border forever (steering needs motion).
+    // It is treated as a vehicle just outside is: free to drive back.
+    if t > BORDER_TOUCH_M && (0.0..=1.0).contains(&lam) {
         Some(t)
     } else {
         None

@@ -145,6 +145,13 @@ impl Path {
                         value: v,
                     });
                 }
+                if v.abs() > crate::limits::MAX_COORDINATE_M {
+                    return Err(PathError::TooFar {
+                        location: location(i),
+                        what,
+                        value: v,
+                    });
+                }
             }
             if let Some(w) = widths {
                 for (what, v) in [("right width", w[i].right_m), ("left width", w[i].left_m)] {
@@ -361,7 +368,7 @@ impl Path {
     pub fn straight(length_m: f64, spacing_m: f64) -> Result<Self, PathError> {
         check_positive("length_m", length_m)?;
         check_positive("spacing_m", spacing_m)?;
-        let n = (length_m / spacing_m).ceil().max(1.0) as usize;
+        let n = point_count("length_m", length_m, (length_m / spacing_m).ceil().max(1.0))?;
         let pts: Vec<[f64; 2]> = (0..=n)
             .map(|i| [length_m * i as f64 / n as f64, 0.0])
             .collect();
@@ -417,7 +424,7 @@ impl Path {
             (15.0, k3, 0.0),
         ];
         let half_len: f64 = half.iter().map(|p| p.0).sum();
-        let n_half = (half_len / spacing_m).ceil() as usize;
+        let n_half = point_count("spacing_m", spacing_m, 2.0 * (half_len / spacing_m).ceil())? / 2;
         let ds = half_len / n_half as f64;
         let curvature = |s: f64| -> f64 {
             let mut start = 0.0;
@@ -1021,6 +1028,19 @@ impl Path {
             None => self.project(p),
         }
     }
+}
+
+/// `count` points (computed from the parameter `name` = `value`) as a usize,
+/// or an error when a generator would make more than the limit.
+fn point_count(name: &'static str, value: f64, count: f64) -> Result<usize, PathError> {
+    crate::limits::count_within(count, crate::limits::MAX_PATH_POINTS).ok_or(
+        PathError::TooManyPoints {
+            name,
+            value,
+            points: count,
+            limit: crate::limits::MAX_PATH_POINTS,
+        },
+    )
 }
 
 fn check_positive(name: &'static str, v: f64) -> Result<(), PathError> {

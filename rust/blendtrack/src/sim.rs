@@ -12,6 +12,7 @@ use crate::config::{validate_vehicle, ControllerConfig};
 use crate::controller::{Controller, Track};
 use crate::error::{Error, StateError};
 use crate::lateral::AlphaSchedule;
+use crate::limits::{count_within, fmt_number, MAX_SIM_STEPS};
 use crate::longitudinal::Obstacle;
 use crate::path::wrap_angle;
 use crate::vehicle::{
@@ -236,7 +237,8 @@ pub fn simulate(
         message: "invalid schedule (alpha outside [0, 1] or bad knots)",
     })?;
     let dt = opts.dt_s;
-    let delay_steps = (opts.delay_s / dt).round() as usize;
+    let (n_steps, must_reach_laps) = step_budget(opts, track.path.length(), vehicle_params)?;
+    let delay_steps = delay_steps(opts)?;
     let mut vehicle = Vehicle::new(
         initial_state(&track, cfg, opts),
         *vehicle_params,
@@ -247,7 +249,6 @@ pub fn simulate(
     // The observer of the true control point keeps its own projection hint.
     let mut truth_hint: Option<f64> = None;
     let mut sensor = Sensor::new(opts.noise, opts.seed);
-    let n_steps = (opts.duration_s / dt).round().max(1.0) as usize;
     let lap_target = opts.laps.map(|l| l * track.path.length());
     let mut trace = Trace::default();
     trace.reserve(n_steps);
@@ -307,6 +308,74 @@ pub fn simulate(
         if !track.path.is_closed() && out.s_rear_m >= track.path.length() - 1e-6 {
             break;
         }
+        if must_reach_laps && i + 1 == n_steps {
+            return Err(StateError::TooLarge {
+                name: "laps",
+                value: opts.laps.unwrap_or(f64::NAN),
+                message: format!(
+                    "not driven within the limit of {MAX_SIM_STEPS} steps (of the duration's {}): fewer laps or a larger dt",
+                    fmt_number((opts.duration_s / dt).round())
+                ),
+            }
+            .into());
+        }
     }
     Ok(trace)
+}
+
+/// How many steps to run, checked against [`MAX_SIM_STEPS`] before anything
+/// is allocated; and whether the run was cut to the limit, so that it must
+/// reach its laps within it (or fail, rather than stop early silently).
+///
+/// Without laps, `duration / dt` steps must fit. With laps, the laps alone
+/// must fit at the vehicle's top speed; a longer duration (a generous cap)
+/// is then cut to the limit.
+fn step_budget(
+    opts: &SimOptions,
+    path_length_m: f64,
+    params: &VehicleParams,
+) -> Result<(usize, bool), StateError> {
+    let wanted = (opts.duration_s / opts.dt_s).round().max(1.0);
+    if let Some(n) = count_within(wanted, MAX_SIM_STEPS) {
+        return Ok((n, false));
+    }
+    let Some(laps) = opts.laps else {
+        return Err(StateError::TooLarge {
+            name: "duration_s",
+            value: opts.duration_s,
+            message: format!(
+                "{} steps of dt_s = {}, more than the limit of {MAX_SIM_STEPS} steps",
+                fmt_number(wanted),
+                fmt_number(opts.dt_s)
+            ),
+        });
+    };
+    let top_speed = opts.fixed_speed_mps.unwrap_or(params.max_speed_mps);
+    let fewest = (laps * path_length_m / (top_speed * opts.dt_s)).ceil();
+    if count_within(fewest, MAX_SIM_STEPS).is_none() {
+        return Err(StateError::TooLarge {
+            name: "laps",
+            value: laps,
+            message: format!(
+                "at least {} steps of dt_s = {} even at {top_speed} m/s, more than the limit of {MAX_SIM_STEPS} steps",
+                fmt_number(fewest),
+                fmt_number(opts.dt_s)
+            ),
+        });
+    }
+    Ok((MAX_SIM_STEPS, true))
+}
+
+/// `round(delay / dt)` commands held in the delay line, within [`MAX_SIM_STEPS`].
+fn delay_steps(opts: &SimOptions) -> Result<usize, StateError> {
+    let n = (opts.delay_s / opts.dt_s).round();
+    count_within(n, MAX_SIM_STEPS).ok_or_else(|| StateError::TooLarge {
+        name: "delay_s",
+        value: opts.delay_s,
+        message: format!(
+            "{} steps of dt_s = {}, more than the limit of {MAX_SIM_STEPS} steps",
+            fmt_number(n),
+            fmt_number(opts.dt_s)
+        ),
+    })
 }

@@ -279,8 +279,14 @@ pub struct Vehicle {
     pub state: VehicleState,
     pub params: VehicleParams,
     pub direction: Direction,
+    /// Commands sent but not yet applied (at most `delay_steps`).
     delay: VecDeque<Command>,
     delay_steps: usize,
+    /// The priming "hold" command, and how many of it are still to come out
+    /// of the line before the first queued command: the line fills as steps
+    /// are taken, so a long delay allocates nothing up front.
+    hold: Command,
+    hold_left: usize,
     /// Acceleration actually applied in the last step (after limits), along travel.
     pub applied_accel_mps2: f64,
 }
@@ -302,8 +308,10 @@ impl Vehicle {
             state,
             params,
             direction,
-            delay: std::iter::repeat(hold).take(delay_steps).collect(),
+            delay: VecDeque::new(),
             delay_steps,
+            hold,
+            hold_left: delay_steps,
             applied_accel_mps2: 0.0,
         }
     }
@@ -318,7 +326,12 @@ impl Vehicle {
             cmd
         } else {
             self.delay.push_back(cmd);
-            self.delay.pop_front().unwrap_or(cmd)
+            if self.hold_left > 0 {
+                self.hold_left -= 1;
+                self.hold
+            } else {
+                self.delay.pop_front().unwrap_or(cmd)
+            }
         };
         let p = &self.params;
         let dmax = p.max_steering_rad();

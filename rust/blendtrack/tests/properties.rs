@@ -62,8 +62,17 @@ fn any_config() -> impl Strategy<Value = ControllerConfig> {
         })
 }
 
+/// 400 cases (what CI runs), or `PROPTEST_CASES` when it is set: a long run
+/// outside CI raises the count with the environment variable.
+fn cases() -> u32 {
+    std::env::var("PROPTEST_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(400)
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 400, .. ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: cases(), .. ProptestConfig::default() })]
 
     #[test]
     fn commands_are_finite_and_bounded(
