@@ -13,6 +13,7 @@ import numpy.typing as npt
 
 __all__ = [
     "__version__",
+    "MAX_SIM_STEPS",
     "BlendtrackError",
     "ConfigError",
     "PathError",
@@ -30,6 +31,8 @@ __all__ = [
 ]
 
 __version__: str
+#: Most steps one ``simulate`` run may record (the core refuses more, before allocating).
+MAX_SIM_STEPS: int
 
 _F64 = npt.NDArray[np.float64]
 _ArrayLike = npt.ArrayLike
@@ -51,7 +54,7 @@ class InputError(BlendtrackError, ValueError):
 
 @final
 class Path:
-    def __new__(cls, points: npt.NDArray[np.float64], widths: npt.NDArray[np.float64] | None = None, closed: bool = False) -> Path: ...
+    def __new__(cls, points: _ArrayLike, widths: _ArrayLike | None = None, closed: bool = False) -> Path: ...
     @staticmethod
     def from_tum_csv(file: str | os.PathLike[str], closed: bool = True) -> Path: ...
     @staticmethod

@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 
 from blendtrack._blendtrack import (
+    MAX_SIM_STEPS,
     ConfigError,
     ControllerConfig,
     Path,
@@ -170,7 +171,15 @@ def _alpha_kwargs(alpha: AlphaSpec, dt_s: float, duration_s: float) -> dict[str,
     if callable(alpha):
         # Sampled on the time grid once, then run as a piecewise schedule in
         # Rust: exact at every step time, no Python call per step.
-        n = max(1, round(duration_s / dt_s))
+        for name, value in (("dt_s", dt_s), ("duration_s", duration_s)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ConfigError(f"simulation parameter `{name}` = {value}: must be finite and > 0")
+        steps = duration_s / dt_s
+        if not (math.isfinite(steps) and steps <= MAX_SIM_STEPS):
+            raise ConfigError(
+                f"alpha callable: duration_s / dt_s = {steps:g} steps to sample, more than the limit of {MAX_SIM_STEPS}"
+            )
+        n = max(1, round(steps))
         t = np.arange(n, dtype=np.float64) * dt_s
         values = np.array([float(alpha(float(ti))) for ti in t], dtype=np.float64)
         return {"alpha_knots": (t, values)}

@@ -26,7 +26,9 @@ pub(crate) fn dict_to_toml(d: Option<&Bound<'_, PyDict>>) -> PyResult<toml::Tabl
             } else if v.is_instance_of::<PyInt>() {
                 match v.extract::<i64>() {
                     Ok(i) => toml::Value::Integer(i),
-                    Err(_) => toml::Value::Float(v.extract()?),
+                    Err(_) => toml::Value::Float(v.extract().map_err(|_| {
+                        PyConfigError::new_err(format!("`{key}`: integer too large for a float"))
+                    })?),
                 }
             } else if v.is_instance_of::<PyFloat>() {
                 toml::Value::Float(v.extract()?)

@@ -105,8 +105,8 @@ pub(crate) fn config_error(e: blendtrack::ConfigError) -> PyErr {
 /// (NaN) stops the simulation.
 pub(crate) fn state_error(e: blendtrack::StateError) -> PyErr {
     match e {
-        blendtrack::StateError::Parameter { .. } => ConfigError::new_err(e.to_string()),
         blendtrack::StateError::NonFinite { .. } => SimulationError::new_err(e.to_string()),
+        _ => ConfigError::new_err(e.to_string()),
     }
 }
 

@@ -11,12 +11,64 @@ use crate::errors::{fleet_error, input_error};
 use crate::path::Path;
 use blendtrack::fleet::{Fleet as CoreFleet, FleetInputs};
 use numpy::{AllowTypeChange, PyArray1, PyArrayLike1};
+use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::borrow::Cow;
 
 type F64In<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
 type I64In<'py> = PyArrayLike1<'py, i64, AllowTypeChange>;
+
+/// `obj` as a 1-D float column named `name`: any array-like of numbers.
+/// Text, or an array that is not 1-D, is a `TypeError` naming the argument.
+fn floats<'py>(name: &str, obj: &Bound<'py, PyAny>) -> PyResult<F64In<'py>> {
+    if obj.cast::<PyArray1<f64>>().is_err() {
+        check_kind(name, obj, "biuf", "numbers")?;
+    }
+    obj.extract::<F64In<'py>>().map_err(|e| {
+        PyTypeError::new_err(format!(
+            "argument `{name}` must be a 1-D array of numbers: {}",
+            one_line(&e.value(obj.py()).to_string())
+        ))
+    })
+}
+
+fn one_line(text: &str) -> String {
+    text.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// `obj` as the slot column: integers only (a float slot id is refused, not
+/// truncated); an empty list is an empty column.
+fn slot_ids<'py>(obj: &Bound<'py, PyAny>) -> PyResult<I64In<'py>> {
+    if obj.cast::<PyArray1<i64>>().is_err() {
+        check_kind("slots", obj, "iu", "integers")?;
+    }
+    obj.extract::<I64In<'py>>().map_err(|e| {
+        PyTypeError::new_err(format!(
+            "argument `slots` must be a 1-D array of integers: {}",
+            one_line(&e.value(obj.py()).to_string())
+        ))
+    })
+}
+
+/// A `TypeError` unless `numpy.asarray(obj)` has a dtype kind in `kinds`
+/// (an empty array passes: it holds no value of a wrong kind).
+fn check_kind(name: &str, obj: &Bound<'_, PyAny>, kinds: &str, what: &str) -> PyResult<()> {
+    let arr = obj
+        .py()
+        .import("numpy")?
+        .call_method1("asarray", (obj,))
+        .map_err(|e| PyTypeError::new_err(format!("argument `{name}`: {e}")))?;
+    let kind: String = arr.getattr("dtype")?.getattr("kind")?.extract()?;
+    let size: usize = arr.getattr("size")?.extract()?;
+    if size > 0 && !kinds.contains(kind.as_str()) {
+        return Err(PyTypeError::new_err(format!(
+            "argument `{name}` must be a 1-D array of {what}, got dtype {}",
+            arr.getattr("dtype")?.str()?
+        )));
+    }
+    Ok(())
+}
 
 fn slice<'a, T: numpy::Element + Copy>(a: &'a numpy::PyReadonlyArray1<'_, T>) -> Cow<'a, [T]> {
     match a.as_slice() {
@@ -145,20 +197,20 @@ impl Fleet {
     fn step<'py>(
         &mut self,
         py: Python<'py>,
-        slots: I64In<'py>,
-        x: F64In<'py>,
-        y: F64In<'py>,
-        theta: F64In<'py>,
-        v: F64In<'py>,
-        delta: F64In<'py>,
-        alpha: Option<F64In<'py>>,
-        leader_gap: Option<F64In<'py>>,
-        leader_speed: Option<F64In<'py>>,
-        stop_gap: Option<F64In<'py>>,
-        speed_limit: Option<F64In<'py>>,
+        slots: &Bound<'py, PyAny>,
+        x: &Bound<'py, PyAny>,
+        y: &Bound<'py, PyAny>,
+        theta: &Bound<'py, PyAny>,
+        v: &Bound<'py, PyAny>,
+        delta: &Bound<'py, PyAny>,
+        alpha: Option<&Bound<'py, PyAny>>,
+        leader_gap: Option<&Bound<'py, PyAny>>,
+        leader_speed: Option<&Bound<'py, PyAny>>,
+        stop_gap: Option<&Bound<'py, PyAny>>,
+        speed_limit: Option<&Bound<'py, PyAny>>,
         dt: Option<f64>,
-        soft_gap: Option<F64In<'py>>,
-        soft_speed: Option<F64In<'py>>,
+        soft_gap: Option<&Bound<'py, PyAny>>,
+        soft_speed: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyDict>> {
         if dt.is_some_and(|d| !(d.is_finite() && d > 0.0)) {
             return Err(input_error(format!(
@@ -166,6 +218,27 @@ impl Fleet {
                 dt.unwrap_or_default()
             )));
         }
+        let opt =
+            |name: &str, o: Option<&Bound<'py, PyAny>>| o.map(|o| floats(name, o)).transpose();
+        let (slots, x, y, theta, v, delta) = (
+            slot_ids(slots)?,
+            floats("x", x)?,
+            floats("y", y)?,
+            floats("theta", theta)?,
+            floats("v", v)?,
+            floats("delta", delta)?,
+        );
+        let (alpha, leader_gap, leader_speed) = (
+            opt("alpha", alpha)?,
+            opt("leader_gap", leader_gap)?,
+            opt("leader_speed", leader_speed)?,
+        );
+        let (stop_gap, speed_limit, soft_gap, soft_speed) = (
+            opt("stop_gap", stop_gap)?,
+            opt("speed_limit", speed_limit)?,
+            opt("soft_gap", soft_gap)?,
+            opt("soft_speed", soft_speed)?,
+        );
         let (sl, xs, ys, ths, vs, ds) = (
             slice(&slots),
             slice(&x),

@@ -32,6 +32,7 @@ mod traffic;
 #[pymodule]
 fn _blendtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    m.add("MAX_SIM_STEPS", blendtrack::limits::MAX_SIM_STEPS)?;
     errors::register(m)?;
     m.add_class::<path::Path>()?;
     m.add_class::<config::ControllerConfig>()?;

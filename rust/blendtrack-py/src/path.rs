@@ -4,8 +4,9 @@
 use crate::errors::path_error;
 use blendtrack::path::{Path as CorePath, Widths};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2, PyUntypedArrayMethods};
+use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBytes, PyDict, PyString};
 
 /// A reference path: polyline with arc length, optional per-point widths.
 #[pyclass(module = "blendtrack", frozen, from_py_object)]
@@ -14,16 +15,68 @@ pub struct Path {
     pub(crate) inner: CorePath,
 }
 
-fn rows(a: &PyReadonlyArray2<'_, f64>, name: &str) -> PyResult<Vec<[f64; 2]>> {
+/// `obj` as N rows of 2 numbers: any array-like of ints or floats of shape
+/// (N, 2). None, text or another shape is refused with the expected shape.
+fn rows(obj: &Bound<'_, PyAny>, name: &str, columns: &str) -> PyResult<Vec<[f64; 2]>> {
+    let expected = format!("`{name}` must be an (N, 2) array of numbers ({columns} per row)");
+    if obj.is_none() || obj.is_instance_of::<PyString>() || obj.is_instance_of::<PyBytes>() {
+        return Err(PyTypeError::new_err(format!(
+            "{expected}, got {}",
+            obj.get_type().name()?
+        )));
+    }
+    let np = obj.py().import("numpy")?;
+    let kind: String = np
+        .call_method1("asarray", (obj,))
+        .and_then(|a| a.getattr("dtype")?.getattr("kind")?.extract())
+        .map_err(|e| PyTypeError::new_err(format!("{expected}: {e}")))?;
+    if !"biuf".contains(kind.as_str()) {
+        return Err(PyTypeError::new_err(format!(
+            "{expected}, got an array of dtype kind '{kind}'"
+        )));
+    }
+    let arr = np
+        .call_method1("asarray", (obj, "float64"))
+        .map_err(|e| PyTypeError::new_err(format!("{expected}: {e}")))?;
+    let a: PyReadonlyArray2<'_, f64> = arr.extract().map_err(|_| {
+        let shape = arr
+            .getattr("shape")
+            .and_then(|s| s.str().map(|s| s.to_string()))
+            .unwrap_or_default();
+        crate::errors::input_error(format!("{expected}, got shape {shape}"))
+    })?;
     let shape = a.shape();
     if shape[1] != 2 {
         return Err(crate::errors::input_error(format!(
-            "`{name}` must have shape (N, 2), got ({}, {})",
+            "{expected}, got shape ({}, {})",
             shape[0], shape[1]
         )));
     }
     let v = a.as_array();
     Ok((0..shape[0]).map(|i| [v[[i, 0]], v[[i, 1]]]).collect())
+}
+
+/// An arc length argument: NaN or infinite is an `InputError`.
+fn finite(name: &str, value: f64) -> PyResult<f64> {
+    if value.is_finite() {
+        Ok(value)
+    } else {
+        Err(crate::errors::input_error(format!(
+            "argument `{name}` = {value}: must be finite"
+        )))
+    }
+}
+
+/// A coordinate argument: finite and within the core's coordinate range.
+fn coordinate(name: &str, value: f64) -> PyResult<f64> {
+    if finite(name, value)?.abs() <= blendtrack::limits::MAX_COORDINATE_M {
+        Ok(value)
+    } else {
+        Err(crate::errors::input_error(format!(
+            "argument `{name}` = {}: beyond +-1e9 m, where f64 cannot resolve the path",
+            blendtrack::limits::fmt_number(value)
+        )))
+    }
 }
 
 #[pymethods]
@@ -32,14 +85,14 @@ impl Path {
     #[new]
     #[pyo3(signature = (points, widths = None, closed = false))]
     fn new(
-        points: PyReadonlyArray2<'_, f64>,
-        widths: Option<PyReadonlyArray2<'_, f64>>,
+        points: &Bound<'_, PyAny>,
+        widths: Option<&Bound<'_, PyAny>>,
         closed: bool,
     ) -> PyResult<Self> {
-        let pts = rows(&points, "points")?;
+        let pts = rows(points, "points", "x, y")?;
         let ws: Option<Vec<Widths>> = match widths {
             Some(w) => Some(
-                rows(&w, "widths")?
+                rows(w, "widths", "right, left")?
                     .into_iter()
                     .map(|[r, l]| Widths {
                         right_m: r,
@@ -143,23 +196,26 @@ impl Path {
     }
 
     /// Point (x, y) at arc length `s_m`.
-    fn point_at(&self, s_m: f64) -> (f64, f64) {
-        let p = self.inner.point_at(s_m);
-        (p.x, p.y)
+    fn point_at(&self, s_m: f64) -> PyResult<(f64, f64)> {
+        let p = self.inner.point_at(finite("s_m", s_m)?);
+        Ok((p.x, p.y))
     }
     /// Tangent heading (rad) at `s_m`.
-    fn heading_at(&self, s_m: f64) -> f64 {
-        self.inner.heading_at(s_m)
+    fn heading_at(&self, s_m: f64) -> PyResult<f64> {
+        Ok(self.inner.heading_at(finite("s_m", s_m)?))
     }
     /// Curvature (1/m, > 0 turning left) at `s_m`.
-    fn curvature_at(&self, s_m: f64) -> f64 {
-        self.inner.curvature_at(s_m)
+    fn curvature_at(&self, s_m: f64) -> PyResult<f64> {
+        Ok(self.inner.curvature_at(finite("s_m", s_m)?))
     }
 
     /// Nearest point of the path to (x, y): dict with s_m, foot_x_m,
     /// foot_y_m, heading_rad, lateral_m (> 0 left), curvature_per_m.
     fn project<'py>(&self, py: Python<'py>, x_m: f64, y_m: f64) -> PyResult<Bound<'py, PyDict>> {
-        let p = self.inner.project(&nalgebra::Point2::new(x_m, y_m));
+        let p = self.inner.project(&nalgebra::Point2::new(
+            coordinate("x_m", x_m)?,
+            coordinate("y_m", y_m)?,
+        ));
         let d = PyDict::new(py);
         d.set_item("s_m", p.s)?;
         d.set_item("foot_x_m", p.foot.x)?;

@@ -161,6 +161,11 @@ pub(crate) fn compute_metrics<'py>(
     wheelbase_m: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let n = t_s.len();
+    if n == 0 {
+        return Err(input_error(
+            "argument `t_s` is empty: metrics of no samples are undefined",
+        ));
+    }
     let cols = [
         ("lateral_error_m", &lateral_error_m),
         ("heading_error_rad", &heading_error_rad),
