@@ -26,7 +26,7 @@ from typing import Any
 
 import pandas as pd
 
-from blendtrack.batch.store import BatchError, ResultStore, atomic_write
+from blendtrack.batch.store import BatchError, ResultStore, atomic_write, atomic_write_all
 
 #: Columns before the parameters, in order.
 META_COLUMNS = ("run_id", "name", "kind", "scenario", "seed", "status", "error", "wall_time_s", "attempt", "host")
@@ -256,7 +256,7 @@ def _cell(text: Any) -> str:
 
 
 def write_report(out: Path) -> pd.DataFrame:
-    """Writes results.parquet, results.csv, plots/ and summary.md (last) from the records in ``out``."""
+    """Writes plots/, then summary.md, results.parquet and results.csv together, from the records in ``out``."""
     store = ResultStore(out)
     manifest = store.manifest()
     if manifest is None:
@@ -265,8 +265,6 @@ def write_report(out: Path) -> pd.DataFrame:
     frame = results_frame(manifest, records)
     buf = io.BytesIO()
     frame.to_parquet(buf, index=False)
-    atomic_write(store.out / "results.parquet", buf.getvalue())
-    atomic_write(store.out / "results.csv", frame.to_csv(index=False))
 
     params = list(dict.fromkeys(k for m in manifest.get("runs", []) for k in m.get("params", {})))
     metric_cols = _metric_order([c for c in frame.columns if c not in META_COLUMNS and c not in params])
@@ -362,5 +360,11 @@ def write_report(out: Path) -> pd.DataFrame:
         "- `batch.json`: the runs of the sweep; `sweep.toml`: the sweep file.",
         "",
     ]
-    atomic_write(store.out / "summary.md", "\n".join(lines))
+    # All three renamed at the end, summary.md first: a batch killed while
+    # its report is made leaves no results.* without a summary.md.
+    atomic_write_all([
+        (store.out / "summary.md", "\n".join(lines)),
+        (store.out / "results.parquet", buf.getvalue()),
+        (store.out / "results.csv", frame.to_csv(index=False)),
+    ])
     return frame

@@ -65,6 +65,83 @@ def atomic_write(path: Path, data: bytes | str) -> None:
         pass
 
 
+def _is_num(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _is_int(v: Any) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def record_problem(rec: dict[str, Any]) -> str | None:
+    """What is wrong with the types of a run record's fields (None: nothing)."""
+    checks = (
+        ("status", lambda v: v in ("ok", "failed", "timeout"), "one of ok, failed, timeout"),
+        ("error", lambda v: v is None or isinstance(v, str), "a string"),
+        ("attempt", lambda v: v is None or (_is_int(v) and v >= 0), "a whole number >= 0"),
+        ("wall_time_s", lambda v: v is None or _is_num(v), "a number"),
+        ("seed", lambda v: v is None or _is_int(v), "a whole number"),
+        ("params", lambda v: v is None or isinstance(v, dict), "a table"),
+        (
+            "metrics",
+            lambda v: v is None or (isinstance(v, dict) and all(x is None or _is_num(x) for x in v.values())),
+            "a table of numbers",
+        ),
+    )
+    for key, ok, what in checks:
+        if key in rec and not ok(rec[key]):
+            return f"`{key}` must be {what}, got {json.dumps(rec[key])[:60]}"
+    return None
+
+
+def manifest_problem(data: Any) -> str | None:
+    """What is wrong with a parsed ``batch.json`` (None: nothing)."""
+    if not isinstance(data, dict):
+        return f"expected a JSON object, got {type(data).__name__}"
+    runs = data.get("runs", [])
+    if not isinstance(runs, list):
+        return f"`runs` must be a list, got {json.dumps(runs)[:60]}"
+    for i, r in enumerate(runs):
+        if not (isinstance(r, dict) and all(isinstance(r.get(k), str) for k in ("run_id", "name", "kind", "scenario"))):
+            return f"runs[{i}] must have the strings run_id, name, kind and scenario"
+        if not isinstance(r.get("params", {}), dict) or not _is_int(r.get("seed")):
+            return f"runs[{i}] must have a table `params` and a whole number `seed`"
+    swept = data.get("swept", {})
+    if not (isinstance(swept, dict) and all(isinstance(v, list) for v in swept.values())):
+        return "`swept` must be a table of lists"
+    for key in ("scenarios", "seeds"):
+        if not isinstance(data.get(key, []), list):
+            return f"`{key}` must be a list"
+    return None
+
+
+def atomic_write_all(files: list[tuple[Path, bytes | str]]) -> None:
+    """Writes every file to a temporary name first, then renames them all in
+    the order given: what takes time (rendering, writing) is done before the
+    first rename, so a kill leaves either the old set or, for an instant
+    between renames, the earlier names of the new set."""
+    tmps: list[tuple[str, Path]] = []
+    try:
+        for path, data in files:
+            raw = data.encode() if isinstance(data, str) else data
+            fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+            tmps.append((tmp, path))
+            os.chmod(tmp, 0o666 & ~_UMASK)
+            with os.fdopen(fd, "wb") as f:
+                f.write(raw)
+                f.flush()
+                os.fsync(f.fileno())
+        for tmp, path in tmps:
+            os.replace(tmp, path)
+    except BaseException:
+        for tmp, _ in tmps:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+        raise
+
+
 class ResultStore:
     """Records of the runs of one batch in ``out``."""
 
@@ -78,7 +155,12 @@ class ResultStore:
         return self.work_dir / run_id
 
     def records(self) -> dict[str, dict[str, Any]]:
-        """Every readable record, by run id."""
+        """Every readable record, by run id.
+
+        Raises :class:`BatchError` naming the file for a record whose fields
+        have the wrong types (edited by hand, say): a report built from it
+        would be wrong, and a resume could not count its attempts.
+        """
         out: dict[str, dict[str, Any]] = {}
         if not self.runs_dir.is_dir():
             return out
@@ -90,14 +172,23 @@ class ResultStore:
             except (OSError, ValueError):
                 continue  # cannot happen with atomic writes; such a run is simply run again
             if isinstance(rec, dict) and rec.get("run_id") == file.stem:
+                problem = record_problem(rec)
+                if problem:
+                    raise BatchError(f"{file}: not a valid run record: {problem} (delete the file to run that run again)")
                 out[file.stem] = rec
         return out
 
     def manifest(self) -> dict[str, Any] | None:
+        """``batch.json``, or None when there is none (or it is not JSON).
+
+        Raises :class:`BatchError` for JSON that is not a batch manifest."""
         try:
             data = json.loads(self.manifest_file.read_text())
         except (OSError, ValueError):
             return None
+        problem = manifest_problem(data)
+        if problem:
+            raise BatchError(f"{self.manifest_file}: not a batch manifest: {problem}")
         return data if isinstance(data, dict) else None
 
     def check(self, sweep: Sweep, resume: bool) -> dict[str, dict[str, Any]]:
@@ -108,6 +199,13 @@ class ResultStore:
         """
         manifest = self.manifest()
         records = self.records()
+        if manifest is None and not records:
+            theirs = [name for name in DERIVED if (self.out / name).exists()]
+            if theirs:
+                raise BatchError(
+                    f"{self.out} holds {', '.join(theirs)} but no batch (no batch.json): "
+                    "not a batch folder, its files would be replaced; choose another --out"
+                )
         if (manifest is not None or records) and not resume:
             n = len(records)
             raise BatchError(

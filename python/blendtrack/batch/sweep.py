@@ -60,6 +60,9 @@ KINDS = ("sim", "sumo", "compare")
 TOP_KEYS = ("kind", "scenarios", "seeds", "out", "timeout_s", "description", "fixed", "grid", "zip", "cases")
 #: Baseline car-following models of ``compare`` (blendtrack.sumo.compare.MODELS).
 BASELINES = ("krauss", "idm", "eidm", "acc")
+#: Most runs one sweep may expand to (scenarios x grid x zip x cases x
+#: seeds), checked on the counts before any list of runs is built.
+MAX_RUNS = 100_000
 
 
 class SweepError(BlendtrackError, ValueError):
@@ -336,7 +339,9 @@ def _check_run(where: str, kind: str, params: dict[str, Any], files: dict[str, s
             head, _, omega = sched.partition(":")
             if head != "sine" or not omega:
                 raise SweepError(f"{where}: alpha_schedule must be sine:OMEGA, got {sched!r}")
-            float(omega)
+            from blendtrack.simulation import _alpha_kwargs
+
+            _alpha_kwargs(sched, 0.01, 1.0)
     except BlendtrackError as e:
         raise SweepError(f"{where}: {' '.join(str(e).split())}") from None
     except ValueError as e:
@@ -404,13 +409,17 @@ def parse_sweep(data: dict[str, Any], path: Path, text: str = "") -> Sweep:
     if isinstance(seeds_raw, int):
         if seeds_raw < 1:
             raise SweepError(f"{f}: seeds: must be >= 1, got {seeds_raw}")
+        if seeds_raw > MAX_RUNS:
+            raise SweepError(f"{f}: seeds: {seeds_raw} seeds, more than the limit of {MAX_RUNS} runs")
         seeds = list(range(seeds_raw))
-    elif isinstance(seeds_raw, list) and seeds_raw and all(isinstance(s, int) and not isinstance(s, bool) and s >= 0 for s in seeds_raw):
+    elif isinstance(seeds_raw, list) and seeds_raw and all(
+        isinstance(s, int) and not isinstance(s, bool) and 0 <= s < 2**64 for s in seeds_raw
+    ):
         seeds = list(seeds_raw)
         if len(set(seeds)) != len(seeds):
             raise SweepError(f"{f}: seeds: the same seed is listed twice")
     else:
-        raise SweepError(f"{f}: seeds: must be a count (>= 1) or a non-empty list of whole numbers >= 0, got {_fmt(seeds_raw)}")
+        raise SweepError(f"{f}: seeds: must be a count (>= 1) or a non-empty list of whole numbers in [0, 2**64), got {_fmt(seeds_raw)}")
 
     out = data.get("out")
     if out is not None and (not isinstance(out, str) or not out.strip()):
@@ -448,6 +457,13 @@ def parse_sweep(data: dict[str, Any], path: Path, text: str = "") -> Sweep:
         raise SweepError(f"{f}: zip: the lists must have the same length ({desc})")
     cases = [{k: _coerce(f"{f}: cases[{i}].{k}", kind, k, v) for k, v in c.items()} for i, c in enumerate(cases_raw)]
 
+    n_runs = len(scen) * math.prod(len(v) for v in grid.values()) * max(len(v) for v in [[0], *zipped.values()])
+    n_runs *= max(len(cases), 1) * len(seeds)
+    if n_runs > MAX_RUNS:
+        raise SweepError(
+            f"{f}: the sweep expands to {n_runs} runs (scenarios x grid x zip x cases x seeds), "
+            f"more than the limit of {MAX_RUNS}"
+        )
     grid_sets = [dict(zip(grid, combo)) for combo in itertools.product(*grid.values())] if grid else [{}]
     n_zip = next(iter(lengths.values())) if zipped else 0
     zip_sets = [{k: v[i] for k, v in zipped.items()} for i in range(n_zip)] if zipped else [{}]
