@@ -30,6 +30,7 @@ import math
 import shlex
 import signal
 import sys
+import warnings
 from collections.abc import Sequence
 from pathlib import Path as FsPath
 from typing import NoReturn
@@ -84,6 +85,17 @@ def _finite(kind: str, low: float | None = None, strict: bool = False, high: flo
 
     parse.__name__ = kind
     return parse
+
+
+def _seed(text: str) -> int:
+    """argparse type: a seed, a whole number in [0, 2**64) (the core's u64)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seed must be a whole number, got {text!r}") from None
+    if not 0 <= value < 2**64:
+        raise argparse.ArgumentTypeError(f"seed must be in [0, 2**64), got {text}")
+    return value
 
 
 def _json_metrics(metrics: dict[str, float]) -> dict[str, float | None]:
@@ -230,7 +242,7 @@ def _add_sim_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None:
     length.add_argument("--laps", type=_finite("laps", 0.0, strict=True), default=None, metavar="N", help="stop after N laps of the track instead")
     sim.add_argument("--dt", type=_finite("dt", 0.0, strict=True, high=1.0), default=0.01, metavar="S", help="time step (s, in (0, 1]; default 0.01)")
     sim.add_argument("--config", default=None, metavar="FILE.toml", help="TOML file with [controller] and [vehicle] tables (flags override it)")
-    sim.add_argument("--seed", type=int, default=0, metavar="N", help="seed of the sensor noise (default 0)")
+    sim.add_argument("--seed", type=_seed, default=0, metavar="N", help="seed of the sensor noise (default 0)")
     sim.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
     sim.set_defaults(run=_cmd_sim)
 
@@ -571,7 +583,7 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
     run.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
     _add_driving_options(run)
     run.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
-    run.add_argument("--seed", type=int, default=0, metavar="N", help="seed of SUMO and of the vehicle selection (default 0)")
+    run.add_argument("--seed", type=_seed, default=0, metavar="N", help="seed of SUMO and of the vehicle selection (default 0)")
     run.add_argument("--gui", action="store_true", help="show the run in sumo-gui (through TraCI)")
     run.add_argument(
         "--backend",
@@ -615,6 +627,13 @@ def _build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Runs the CLI on ``argv`` (default: ``sys.argv[1:]``); returns the exit code."""
     args = _build_parser().parse_args(argv)
+    # A warning is one line too, saying what happened (no source line).
+    command = args.command
+
+    def one_line(message: Warning | str, category: type[Warning], filename: str, lineno: int, line: str | None = None) -> str:
+        return f"blendtrack {command}: warning: {message}\n"
+
+    warnings.formatwarning = one_line
     try:
         exit_code: int = args.run(args)
     except blendtrack.BlendtrackError as e:

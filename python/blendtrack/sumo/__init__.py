@@ -6,7 +6,8 @@
 - :class:`SumoRun` runs it with the selected vehicles under blendtrack
   control (libsumo in-process, or TraCI for sumo-gui).
 - :func:`run_scenario` does both and writes the outputs
-  (``vehicles.csv``, ``summary.json``, plots, SUMO's own outputs in ``sumo/``).
+  (``vehicles.csv``, ``summary.json``, plots, SUMO's own outputs in ``sumo/``);
+  the folder holds an ``INCOMPLETE`` marker until they are all written.
 """
 
 from __future__ import annotations
@@ -54,27 +55,63 @@ def run_scenario(scenario: Scenario, options: RunOptions, out: str | os.PathLike
     pickle through their TOML).
     """
     from blendtrack.sumo import runner
+    from blendtrack.sumo.selection import check_controlled_ids, reconcile_sumo_args
 
     if not isinstance(out, (str, os.PathLike)):
         raise TypeError(f"run_scenario: out must be a folder path (str or os.PathLike), not {type(out).__name__}")
     out = Path(out)
+    options = reconcile_sumo_args(options)
+    check_controlled_ids(scenario, options)
     uses_libsumo = options.backend == "libsumo" and not options.gui
     if uses_libsumo and runner._LIBSUMO_STARTED:
         return _run_in_child(scenario, options, out)
     return _run_here(scenario, options, out)
 
 
+#: Written into the output folder when a run starts and removed when all its
+#: outputs are written: a folder holding it describes a run that did not
+#: finish (killed, or failed), whatever else it holds.
+INCOMPLETE = "INCOMPLETE"
+#: What a run writes (removed at the start, so no earlier run's file is left
+#: beside a new run's partial outputs).
+OUTPUTS = (
+    "summary.json", "vehicles.csv", "trace.csv", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
+    "sumo/tripinfo.xml", "sumo/collisions.xml", "sumo/sumo.log", "sumo/fcd.xml", "sumo/ssm.xml",
+)
+
+
+def _is_sumo_error(e: BaseException) -> bool:
+    """An exception of libsumo or TraCI (SUMO refused or lost the simulation)."""
+    return any(c.__module__.split(".")[0] in ("libsumo", "traci") for c in type(e).__mro__)
+
+
 def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     from blendtrack.sumo import report
 
     out.mkdir(parents=True, exist_ok=True)
+    marker = out / INCOMPLETE
+    marker.write_text(
+        f"blendtrack sumo run of {scenario.sumocfg} started here and has not finished (still running, killed or "
+        "failed): the other files in this folder are partial.\n"
+    )
+    for name in OUTPUTS:
+        (out / name).unlink(missing_ok=True)
     run = SumoRun(scenario, options, out)
-    result = run.run()
+    try:
+        result = run.run()
+    except Exception as e:
+        if not _is_sumo_error(e):
+            raise
+        first = (str(e).strip() or type(e).__name__).splitlines()[0]
+        raise ScenarioError(
+            f"{scenario.sumocfg}: SUMO stopped the run: {first} (see {out / 'sumo' / 'sumo.log'})"
+        ) from None
     report.write_vehicles_csv(result.records, out / "vehicles.csv")
     if options.trace:
         run.write_trace(out / "trace.csv")
     report.plot_run(result, out, scenario.comfort_lateral_accel_mps2)
     report.write_json(result.summary, out / "summary.json")
+    marker.unlink()
     return result
 
 
