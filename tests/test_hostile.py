@@ -459,6 +459,24 @@ def test_bad_sweeps_are_refused_before_running(
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["--dask-local", "100000"], "dask-local must be <= 256"),
+        (["--workers", "0"], "workers must be >= 1"),
+        (["--workers", "1e3"], "workers must be a whole number"),
+        (["--timeout", "nan"], "timeout must be finite"),
+    ],
+)
+def test_bad_batch_options_are_one_line_errors(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], args: list[str], needle: str
+) -> None:
+    sweep = _sweep(tmp_path, 'kind = "sim"\nscenarios = ["straight:100"]\n')
+    rc, _, err = _main(["batch", sweep, *args, "--out", str(tmp_path / "out")], capsys)
+    _assert_one_line_error(rc, err, needle)
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.fixture(scope="module")
 def done_batch(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A finished batch of two short sim runs (made once, copied per test)."""

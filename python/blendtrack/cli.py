@@ -478,7 +478,7 @@ def _raise_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def _positive_int(what: str):  # type: ignore[no-untyped-def]
+def _positive_int(what: str, high: int | None = None):  # type: ignore[no-untyped-def]
     def parse(text: str) -> int:
         try:
             value = int(text)
@@ -486,6 +486,8 @@ def _positive_int(what: str):  # type: ignore[no-untyped-def]
             raise argparse.ArgumentTypeError(f"{what} must be a whole number, got {text!r}") from None
         if value < 1:
             raise argparse.ArgumentTypeError(f"{what} must be >= 1, got {text}")
+        if high is not None and value > high:
+            raise argparse.ArgumentTypeError(f"{what} must be <= {high}, got {text}")
         return value
 
     parse.__name__ = what
@@ -511,15 +513,15 @@ def _add_batch_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> Non
     where = b.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
-        type=_positive_int("workers"),
+        type=_positive_int("workers", high=256),
         metavar="N",
-        help="local worker processes, one run each at a time (default: the number of cores)",
+        help="local worker processes, one run each at a time (<= 256; default: the number of cores)",
     )
     where.add_argument(
         "--dask-local",
-        type=_positive_int("dask-local"),
+        type=_positive_int("dask-local", high=256),
         metavar="N",
-        help="start a Dask LocalCluster of N single-threaded worker processes and run there",
+        help="start a Dask LocalCluster of N (<= 256) single-threaded worker processes and run there",
     )
     where.add_argument(
         "--scheduler",
