@@ -180,7 +180,7 @@ fn reverse_gains(k_reverse: f64) -> LateralGains {
 
 /// Reversing along +x on a straight path (travel direction -x, the path
 /// traversed toward -x), with the front axle at lateral `e_f` (path frame,
-/// > 0 on the left of the path's direction) and travel heading error `e_t`:
+/// positive on the left of the path's direction) and travel heading error `e_t`:
 /// the rate of change of (e_f, e_t) under `stanley_command`, by the exact
 /// kinematics of the reversing bicycle.
 fn reverse_rates(e_f: f64, e_t: f64, v: f64, g: &LateralGains) -> (f64, f64) {
