@@ -224,6 +224,11 @@ def test_route_geometry_maps_track_positions_to_sumo_lane_positions() -> None:
     g = route_geometry(net, edges, 0)
     s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(g.points, axis=0).T))])
     assert g.length_m == pytest.approx(s[-1], abs=1e-9)
+    # The core's Path (sqrt segment lengths, duplicate points dropped) measures
+    # the arc lengths the piece table is given in (hypot) to within rounding.
+    path = blendtrack.Path(g.points, g.widths, closed=False)
+    assert path.length_m == pytest.approx(g.length_m, abs=1e-9)
+    assert len(path) == len(s) and np.allclose(path.vertex_s(), s, atol=1e-9, rtol=0)
     assert np.all(np.diff(g.piece_start_s) > 0)
     checked = 0
     for k, lane_id in enumerate(g.piece_lane):
