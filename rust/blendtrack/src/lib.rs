@@ -30,6 +30,7 @@ pub mod limits;
 pub mod longitudinal;
 pub mod metrics;
 pub mod path;
+pub mod polyline;
 pub mod sim;
 pub mod traffic;
 pub mod vehicle;
