@@ -1,6 +1,6 @@
-//! `RouteFleet` for Python: the core's route-driving batch stepper
-//! (`blendtrack::traffic`), which the SUMO plugin calls twice per simulation
-//! step (`plan`, then `step`) for all controlled vehicles at once.
+//! `RouteFleet` for Python: the route-driving batch stepper of the
+//! `blendtrack-traffic` crate, which the SUMO plugin calls twice per
+//! simulation step (`plan`, then `step`) for all controlled vehicles at once.
 //!
 //! Lanes, edges, junction lanes and traffic lights are integers the caller
 //! interns; traffic-light states are SUMO state strings (`"rrGGy..."`).
@@ -10,11 +10,11 @@
 use crate::config::{ControllerConfig, VehicleParams};
 use crate::errors::{config_error, fleet_error, input_error};
 use crate::path::Path;
-use blendtrack::traffic::{
+use blendtrack::VehicleState;
+use blendtrack_traffic::{
     Body, LaneChangeDue, Move, Observations, Piece, Route, RouteFleet as CoreRouteFleet, Signal,
     SoftLeaders, StopLine, TrafficError, TrafficSettings,
 };
-use blendtrack::VehicleState;
 use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
 use pyo3::prelude::*;
@@ -52,7 +52,7 @@ fn u32_of(name: &str, i: usize, x: i64) -> PyResult<u32> {
 
 fn stats_dict<'py>(
     py: Python<'py>,
-    s: &blendtrack::traffic::DriveStats,
+    s: &blendtrack_traffic::DriveStats,
 ) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("steps", s.steps)?;

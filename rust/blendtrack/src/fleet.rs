@@ -1,7 +1,7 @@
-//! Batch control of many vehicles in one call per step (the SUMO plugin's unit).
+//! Batch control of many vehicles in one call per step (a traffic bridge's unit).
 //!
 //! A [`Fleet`] keeps a registry of tracks (a path plus its virtual corridor,
-//! e.g. one per SUMO route) and of vehicles, each in a numbered slot with its
+//! e.g. one per road route) and of vehicles, each in a numbered slot with its
 //! own [`Controller`] (projection hints), configuration and vehicle limits.
 //! Vehicles come and go: [`Fleet::add_vehicle`] returns a slot number,
 //! [`Fleet::remove_vehicle`] frees it, and a freed number is handed out again
