@@ -3,6 +3,7 @@
 //! ([`glide_distance`]), by lane position, or by (x, y).
 
 use crate::route::Route;
+use crate::{Driven, TrafficSettings};
 
 /// How to put a vehicle's new pose into the simulator.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -77,6 +78,121 @@ pub(crate) fn glide_distance(
         dist += q.lane_length_m;
     }
     None
+}
+
+/// A vehicle's step as the choice of its move sees it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Motion {
+    /// The fleet's outputs and the new state are usable (finite, ok).
+    pub usable: bool,
+    /// Errors of the control point (m, rad), the new speed (m/s).
+    pub lateral_error_m: f64,
+    pub heading_error_rad: f64,
+    pub v_mps: f64,
+    /// Arc length of the front at the new state (m).
+    pub s_front_m: f64,
+    pub dt_s: f64,
+}
+
+/// The chosen move with what goes with it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Placement {
+    pub mv: Move,
+    /// Lane position for [`Move::Lane`] (m, before the simulator's movement).
+    pub pos: f64,
+    /// The speed to give the simulator (m/s).
+    pub sumo_speed: f64,
+    /// Where the simulator will have the front after its movement, when
+    /// blendtrack can tell without asking: (lane, position).
+    pub predicted: Option<(u32, f64)>,
+}
+
+/// How to put vehicle `d`'s new pose (on piece `k` of its route) into the
+/// simulator, cheapest first (see the crate docs).
+pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion) -> Placement {
+    let route = &d.route;
+    let piece = route.pieces[k];
+    let (v, dt_s, sf_new) = (m.v_mps, m.dt_s, m.s_front_m);
+    // Where the front must be on the piece's lane after the
+    // simulator's own movement over the step.
+    let target = piece.lane_pos_start_m + (sf_new - piece.start_m) * piece.scale;
+    let mut p = Placement {
+        mv: Move::Xy,
+        pos: target - v * dt_s,
+        sumo_speed: v,
+        predicted: None,
+    };
+    let on_lane = m.lateral_error_m.abs() + piece.offset_m < st.lane_move_lateral_m
+        && m.heading_error_rad.abs() < st.lane_move_heading_rad
+        && v >= 0.0;
+    // (distance the simulator must move the front, crosses a lane end)
+    let glide = if on_lane {
+        glide_distance(route, k, target, d.known)
+    } else {
+        None
+    };
+    p.mv = if !m.usable {
+        Move::Invalid
+    } else if k == route.pieces.len() - 1
+        && route.lane_change.is_none()
+        && sf_new > route.length_m - 2.0 * v * dt_s - 2.0
+    {
+        // About to arrive: a deferred (x, y) move would be applied
+        // after the simulator removed the vehicle.
+        Move::Speed
+    } else if let Some((dist, cross)) =
+        glide.filter(|&(dist, _)| dist - v * piece.scale * dt_s <= GLIDE_BEHIND_M)
+    {
+        glide_move(d, &mut p, v * piece.scale, dist, cross, dt_s)
+    } else if on_lane && p.pos >= d.body.length_m {
+        if let Some((lane, known)) = d.known {
+            if lane == piece.lane {
+                p.pos = p.pos.max(known);
+            }
+        }
+        p.predicted = Some((piece.lane, p.pos + v * dt_s));
+        Move::Lane
+    } else {
+        Move::Xy
+    };
+    p
+}
+
+/// A speed-only move: the simulator's own movement carries the front
+/// `dist` along its lanes at the speed that makes it up, kept within
+/// GLIDE_TOLERANCE_* of the vehicle's own speed in the simulator's lane
+/// coordinates (`expect`): a simulator a little off (ahead, or behind by up
+/// to GLIDE_BEHIND_M) is brought back over a few steps; it is never moved
+/// backwards. [`Move::Hold`] when the speed it has will do.
+fn glide_move(
+    d: &Driven,
+    p: &mut Placement,
+    expect: f64,
+    dist: f64,
+    cross: bool,
+    dt_s: f64,
+) -> Move {
+    let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect;
+    p.sumo_speed = (dist / dt_s).clamp((expect - tol).max(0.0), expect + tol);
+    // A standstill is always sent: a held creep speed would let
+    // the simulator drift ahead (0.4 mm a step at 4 mm/s), and
+    // it is never moved back.
+    let hold = !cross
+        && (p.sumo_speed - d.sumo_speed).abs() < HOLD_SPEED_MPS
+        && (p.sumo_speed > 0.0 || d.sumo_speed == 0.0);
+    if hold {
+        p.sumo_speed = d.sumo_speed;
+    }
+    if !cross {
+        // Exact; after a lane end the simulator's choice of the
+        // next lane is read back instead.
+        p.predicted = d.known.map(|(lane, at)| (lane, at + p.sumo_speed * dt_s));
+    }
+    if hold {
+        Move::Hold
+    } else {
+        Move::Speed
+    }
 }
 
 #[cfg(test)]

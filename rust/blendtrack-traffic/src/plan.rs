@@ -3,8 +3,9 @@
 //! become each vehicle's leader, stop line and yield questions.
 
 use crate::error::check_len;
+use crate::route::Route;
 use crate::signal::{signal_at, Signal};
-use crate::{RouteFleet, TrafficError};
+use crate::{Driven, RouteFleet, TrafficError, TrafficSettings};
 use blendtrack::longitudinal::stopping_accel;
 use blendtrack::{ControllerConfig, FleetError};
 
@@ -84,6 +85,30 @@ impl RouteFleet {
     /// `obs.slots`) of the vehicles approaching a link without priority:
     /// [`RouteFleet::step`] needs, for each, whether it must give way.
     pub fn plan(&mut self, obs: &Observations<'_>) -> Result<Vec<usize>, TrafficError> {
+        self.check_observations(obs)?;
+        let n = obs.slots.len();
+        let mut plan = Plan {
+            slots: obs.slots.to_vec(),
+            leader_gap: vec![f64::NAN; n],
+            leader_speed: vec![f64::NAN; n],
+            stop_gap: vec![f64::NAN; n],
+            soft_gap: vec![f64::NAN; n],
+            soft_speed: vec![f64::NAN; n],
+            limit: vec![f64::NAN; n],
+            yield_gap: vec![f64::NAN; n],
+            queries: Vec::new(),
+        };
+        for i in 0..n {
+            self.plan_leaders(obs, i, &mut plan);
+            self.plan_vehicle(obs, i, &mut plan)?;
+        }
+        let queries = plan.queries.clone();
+        self.plan = Some(plan);
+        Ok(queries)
+    }
+
+    /// One entry per slot in every column, each slot driven here and listed once.
+    fn check_observations(&self, obs: &Observations<'_>) -> Result<(), TrafficError> {
         let n = obs.slots.len();
         check_len("leader_gap", n, obs.leader_gap_m.len())?;
         check_len("leader_slot", n, obs.leader_slot.len())?;
@@ -102,136 +127,175 @@ impl RouteFleet {
                 return Err(FleetError::DuplicateSlot { slot }.into());
             }
         }
-        let st = self.settings;
-        let margin = st.standstill_margin_m;
-        let mut plan = Plan {
-            slots: obs.slots.to_vec(),
-            leader_gap: vec![f64::NAN; n],
-            leader_speed: vec![f64::NAN; n],
-            stop_gap: vec![f64::NAN; n],
-            soft_gap: vec![f64::NAN; n],
-            soft_speed: vec![f64::NAN; n],
-            limit: vec![f64::NAN; n],
-            yield_gap: vec![f64::NAN; n],
-            queries: Vec::new(),
-        };
-        for i in 0..n {
-            let slot = obs.slots[i] as usize;
-            let gap = obs.leader_gap_m[i];
-            if gap.is_finite() {
-                // The simulator's gap leaves out minGap, and the simulator
-                // counts anything closer as a collision: stop further back.
-                plan.leader_gap[i] = gap - margin;
-                plan.leader_speed[i] = self.speed_of(obs.leader_slot[i], obs.leader_speed_mps[i]);
-            }
-            if let Some(sl) = &obs.soft {
-                if sl.gap_m[i].is_finite() {
-                    plan.soft_gap[i] = sl.gap_m[i] - margin;
-                    plan.soft_speed[i] = self.speed_of(sl.slot[i], sl.speed_mps[i]);
-                }
-            }
-            let cfg = self.fleet.vehicle_config(slot as i64)?;
-            let d = self.driven[slot].as_ref().expect("checked above");
-            let route = d.route.clone();
-            let sf = d.s_front_m;
-            plan.limit[i] = route.pieces[route.piece_at(sf)].speed_mps;
-            let mut next = d.next_stop;
-            while next < route.stops.len() && route.stops[next].s_m < sf - 0.5 {
-                next += 1;
-            }
-            let v = d.state.v_mps.abs();
-            let mut yellow = d.yellow;
-            let mut holding = d.holding.filter(|&k| k == next);
-            let mut stop_gap = f64::NAN;
-            if let Some(stop) = route.stops.get(next) {
-                let gap = stop.s_m - sf - margin;
-                let sig = signal_at(&self.signals, stop);
-                if sig != Signal::Yellow {
-                    yellow = None;
-                }
-                let lg = plan.leader_gap[i];
-                let lv = plan.leader_speed[i];
-                let lv = if lv.is_finite() { lv.max(0.0) } else { 0.0 };
-                match sig {
-                    Signal::Stop => stop_gap = gap,
-                    Signal::Yellow => {
-                        // The decision holds until the light changes: decided
-                        // anew every step it flips to "go" as the line nears
-                        // (the law brakes harder than b_f at the end) and then
-                        // fails to stop at red.
-                        let decision = match yellow {
-                            Some((k, stop_here)) if k == next => stop_here,
-                            _ => can_stop(cfg, v, gap),
-                        };
-                        yellow = Some((next, decision));
-                        if decision {
-                            stop_gap = gap;
-                        }
-                    }
-                    Signal::Priority | Signal::Yield => {
-                        let near = gap < st.yield_lookahead_m;
-                        let held = d.holding == Some(next);
-                        // Where the leader's back would stop if it braked now at 4 m/s^2.
-                        let blocked = lg.is_finite()
-                            && sf + lg + margin + lv * lv / 8.0 - stop.exit_m
-                                < d.body.length_m + d.body.min_gap_m + margin;
-                        if near && blocked && (held || can_stop(cfg, v, gap)) {
-                            // Keep the junction clear: no room behind the
-                            // leader on the far side, so wait at the line.
-                            stop_gap = gap;
-                            holding = Some(next);
-                        } else if (sig == Signal::Yield || stop.check_inside)
-                            && near
-                            && (held || can_stop(cfg, v, gap))
-                        {
-                            // Give way while the simulator reports foes (or,
-                            // with the right of way, while the caller sees a
-                            // vehicle inside the junction in the way); too
-                            // late to stop, clear the junction instead.
-                            plan.yield_gap[i] = gap;
-                            plan.queries.push(i);
-                        } else {
-                            holding = None;
-                        }
-                    }
-                }
-            }
-            // A track that stops where a lane change is due ends
-            // lane_change_room_m early: the vehicle waits there for a gap.
-            // The end of the route (with stop_at_route_end): a standing
-            // obstacle a little past the track's end, so the vehicle slows
-            // down and the simulator sees it arrive. Otherwise the vehicle
-            // drives through its route's end and the simulator's own movement
-            // (a speed move near a lane's end) carries it out.
-            let end_gap = if route.lane_change.is_some() {
-                route.length_m - st.lane_change_room_m - sf - margin
-            } else if st.stop_at_route_end {
-                route.length_m + st.route_end_extra_m - sf
-            } else {
-                f64::INFINITY
-            };
-            if end_gap < st.route_end_horizon_m {
-                stop_gap = if stop_gap.is_nan() {
-                    end_gap
-                } else {
-                    stop_gap.min(end_gap)
-                };
-            }
-            plan.stop_gap[i] = stop_gap;
-            let lane = obs.lane[i];
-            let known = (lane >= 0 && obs.lane_pos_m[i].is_finite())
-                .then(|| (lane as u32, obs.lane_pos_m[i]));
-            let d = self.driven[slot].as_mut().expect("checked above");
-            d.next_stop = next;
-            d.yellow = yellow;
-            d.holding = holding;
-            if known.is_some() {
-                d.known = known;
+        Ok(())
+    }
+
+    /// The leader and the soft leader of entry `i`, kept a margin behind.
+    fn plan_leaders(&self, obs: &Observations<'_>, i: usize, plan: &mut Plan) {
+        let margin = self.settings.standstill_margin_m;
+        let gap = obs.leader_gap_m[i];
+        if gap.is_finite() {
+            // The simulator's gap leaves out minGap, and the simulator
+            // counts anything closer as a collision: stop further back.
+            plan.leader_gap[i] = gap - margin;
+            plan.leader_speed[i] = self.speed_of(obs.leader_slot[i], obs.leader_speed_mps[i]);
+        }
+        if let Some(sl) = &obs.soft {
+            if sl.gap_m[i].is_finite() {
+                plan.soft_gap[i] = sl.gap_m[i] - margin;
+                plan.soft_speed[i] = self.speed_of(sl.slot[i], sl.speed_mps[i]);
             }
         }
-        let queries = plan.queries.clone();
-        self.plan = Some(plan);
-        Ok(queries)
+    }
+
+    /// Entry `i`'s speed limit, stop line (or the yield question it asks),
+    /// and the lane position the simulator reported for it.
+    fn plan_vehicle(
+        &mut self,
+        obs: &Observations<'_>,
+        i: usize,
+        plan: &mut Plan,
+    ) -> Result<(), TrafficError> {
+        let st = self.settings;
+        let slot = obs.slots[i] as usize;
+        let cfg = self.fleet.vehicle_config(slot as i64)?;
+        let d = self.driven[slot].as_ref().expect("checked above");
+        let route = &d.route;
+        let sf = d.s_front_m;
+        plan.limit[i] = route.pieces[route.piece_at(sf)].speed_mps;
+        let mut next = d.next_stop;
+        while next < route.stops.len() && route.stops[next].s_m < sf - 0.5 {
+            next += 1;
+        }
+        let leader = (plan.leader_gap[i], plan.leader_speed[i]);
+        let mut dec = decide_stop(d, next, cfg, &self.signals, leader, &st);
+        if let Some(gap) = dec.yield_gap {
+            plan.yield_gap[i] = gap;
+            plan.queries.push(i);
+        }
+        let end_gap = route_end_gap(route, sf, &st);
+        if end_gap < st.route_end_horizon_m {
+            dec.stop_gap = if dec.stop_gap.is_nan() {
+                end_gap
+            } else {
+                dec.stop_gap.min(end_gap)
+            };
+        }
+        plan.stop_gap[i] = dec.stop_gap;
+        let lane = obs.lane[i];
+        let known =
+            (lane >= 0 && obs.lane_pos_m[i].is_finite()).then(|| (lane as u32, obs.lane_pos_m[i]));
+        let d = self.driven[slot].as_mut().expect("checked above");
+        d.next_stop = next;
+        d.yellow = dec.yellow;
+        d.holding = dec.holding;
+        if known.is_some() {
+            d.known = known;
+        }
+        Ok(())
+    }
+}
+
+/// What a vehicle does at the stop line it approaches.
+#[derive(Debug, Clone, Copy)]
+struct StopDecision {
+    /// (stop index, stop?) decided at a yellow light.
+    yellow: Option<(usize, bool)>,
+    /// The stop line it waits at to give way or keep the junction clear.
+    holding: Option<usize>,
+    /// Gap to where it stops (m; NaN: no stop).
+    stop_gap: f64,
+    /// Gap to the line of a link that needs the simulator's word on foes.
+    yield_gap: Option<f64>,
+}
+
+/// The decision of vehicle `d` at stop line `next` of its route (if any),
+/// behind a leader (gap, speed; NaN: none) at the planning deceleration.
+fn decide_stop(
+    d: &Driven,
+    next: usize,
+    cfg: &ControllerConfig,
+    signals: &[Vec<Signal>],
+    (lg, lv): (f64, f64),
+    st: &TrafficSettings,
+) -> StopDecision {
+    let margin = st.standstill_margin_m;
+    let sf = d.s_front_m;
+    let v = d.state.v_mps.abs();
+    let mut dec = StopDecision {
+        yellow: d.yellow,
+        holding: d.holding.filter(|&k| k == next),
+        stop_gap: f64::NAN,
+        yield_gap: None,
+    };
+    let Some(stop) = d.route.stops.get(next) else {
+        return dec;
+    };
+    let gap = stop.s_m - sf - margin;
+    let sig = signal_at(signals, stop);
+    if sig != Signal::Yellow {
+        dec.yellow = None;
+    }
+    let lv = if lv.is_finite() { lv.max(0.0) } else { 0.0 };
+    match sig {
+        Signal::Stop => dec.stop_gap = gap,
+        Signal::Yellow => {
+            // The decision holds until the light changes: decided
+            // anew every step it flips to "go" as the line nears
+            // (the law brakes harder than b_f at the end) and then
+            // fails to stop at red.
+            let decision = match dec.yellow {
+                Some((k, stop_here)) if k == next => stop_here,
+                _ => can_stop(cfg, v, gap),
+            };
+            dec.yellow = Some((next, decision));
+            if decision {
+                dec.stop_gap = gap;
+            }
+        }
+        Signal::Priority | Signal::Yield => {
+            let near = gap < st.yield_lookahead_m;
+            let held = d.holding == Some(next);
+            // Where the leader's back would stop if it braked now at 4 m/s^2.
+            let blocked = lg.is_finite()
+                && sf + lg + margin + lv * lv / 8.0 - stop.exit_m
+                    < d.body.length_m + d.body.min_gap_m + margin;
+            if near && blocked && (held || can_stop(cfg, v, gap)) {
+                // Keep the junction clear: no room behind the
+                // leader on the far side, so wait at the line.
+                dec.stop_gap = gap;
+                dec.holding = Some(next);
+            } else if (sig == Signal::Yield || stop.check_inside)
+                && near
+                && (held || can_stop(cfg, v, gap))
+            {
+                // Give way while the simulator reports foes (or,
+                // with the right of way, while the caller sees a
+                // vehicle inside the junction in the way); too
+                // late to stop, clear the junction instead.
+                dec.yield_gap = Some(gap);
+            } else {
+                dec.holding = None;
+            }
+        }
+    }
+    dec
+}
+
+/// The gap to where the route's end stops a vehicle whose front is at `sf`.
+/// A track that stops where a lane change is due ends `lane_change_room_m`
+/// early: the vehicle waits there for a gap. The end of the route (with
+/// `stop_at_route_end`): a standing obstacle a little past the track's end,
+/// so the vehicle slows down and the simulator sees it arrive. Otherwise
+/// (+inf) the vehicle drives through its route's end and the simulator's own
+/// movement (a speed move near a lane's end) carries it out.
+fn route_end_gap(route: &Route, sf: f64, st: &TrafficSettings) -> f64 {
+    if route.lane_change.is_some() {
+        route.length_m - st.lane_change_room_m - sf - st.standstill_margin_m
+    } else if st.stop_at_route_end {
+        route.length_m + st.route_end_extra_m - sf
+    } else {
+        f64::INFINITY
     }
 }
 

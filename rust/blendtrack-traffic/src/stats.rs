@@ -1,5 +1,7 @@
 //! Per-vehicle statistics of a driven vehicle ([`DriveStats`]).
 
+use crate::TrafficSettings;
+
 /// A driven vehicle's statistics since it was added.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DriveStats {
@@ -47,6 +49,57 @@ impl Default for DriveStats {
             reverse_warnings: 0,
             red_light_violations: 0,
         }
+    }
+}
+
+/// One step of a driven vehicle, as its statistics take it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct StepRecord {
+    pub lateral_error_m: f64,
+    pub lateral_error_rear_m: f64,
+    pub lateral_error_front_m: f64,
+    pub heading_error_rad: f64,
+    pub v_mps: f64,
+    pub accel_mps2: f64,
+    pub lateral_accel_mps2: f64,
+    pub curvature_per_m: f64,
+    pub speed_limit_mps: f64,
+    pub dt_s: f64,
+}
+
+impl DriveStats {
+    /// Adds one step; returns the `(|curvature|, |v|, |e|, |lateral
+    /// acceleration|)` sample when one is due (every `sample_every` steps).
+    pub(crate) fn add_step(&mut self, r: &StepRecord, st: &TrafficSettings) -> Option<[f64; 4]> {
+        let (v, dt_s, lat_acc) = (r.v_mps, r.dt_s, r.lateral_accel_mps2);
+        let ae = r.lateral_error_m.abs();
+        self.steps += 1;
+        self.sum_abs_e += ae;
+        self.sum_e2 += ae * ae;
+        self.max_abs_e = self.max_abs_e.max(ae);
+        self.sum_abs_e_rear += r.lateral_error_rear_m.abs();
+        self.sum_abs_e_front += r.lateral_error_front_m.abs();
+        self.sum_eth2 += r.heading_error_rad * r.heading_error_rad;
+        self.sum_v += v.abs();
+        self.distance_m += v.abs() * dt_s;
+        self.max_lat_acc = self.max_lat_acc.max(lat_acc.abs());
+        if lat_acc.abs() > st.comfort_lateral_accel_mps2 {
+            self.time_above_comfort_s += dt_s;
+        }
+        if self.last_acc.is_finite() {
+            let jerk = (r.accel_mps2 - self.last_acc) / dt_s;
+            self.sum_jerk2 += jerk * jerk;
+            self.jerk_n += 1;
+        }
+        self.last_acc = r.accel_mps2;
+        if v.abs() > r.speed_limit_mps * 1.0001 {
+            self.speed_warnings += 1;
+        }
+        if v < 0.0 {
+            self.reverse_warnings += 1;
+        }
+        (self.steps % st.sample_every == 0)
+            .then(|| [r.curvature_per_m.abs(), v.abs(), ae, lat_acc.abs()])
     }
 }
 

@@ -3,11 +3,13 @@
 //! the statistics; results in [`RouteOutputs`].
 
 use crate::error::check_len;
-use crate::placement::*;
+use crate::placement::{choose_move, Motion, Move};
+use crate::plan::Plan;
 use crate::signal::{signal_at, Signal};
-use crate::{RouteFleet, TrafficError};
+use crate::stats::StepRecord;
+use crate::{Driven, RouteFleet, TrafficError};
 use blendtrack::path::wrap_angle;
-use blendtrack::{FleetInputs, VehicleState};
+use blendtrack::{Fleet, FleetInputs, FleetOutputs, NextStates, VehicleState};
 use nalgebra::Point2;
 
 /// One step's results, one entry per planned slot, in the plan's order.
@@ -81,6 +83,11 @@ impl RouteOutputs {
 impl RouteFleet {
     /// Second half of a step: `must_yield[j]` answers the `j`-th index
     /// returned by [`RouteFleet::plan`]. Steps every planned vehicle over `dt_s`.
+    ///
+    /// Stages: the yield answers become stop lines ([`Self::answer_yields`]),
+    /// the planned vehicles' states are packed into the fleet's inputs and
+    /// stepped, then each vehicle's move is chosen, its red-light crossing
+    /// detected and its statistics accumulated ([`Self::step_vehicle`]).
     pub fn step(&mut self, must_yield: &[bool], dt_s: f64) -> Result<RouteOutputs, TrafficError> {
         if !(dt_s.is_finite() && dt_s > 0.0) {
             return Err(TrafficError::Parameter {
@@ -94,6 +101,19 @@ impl RouteFleet {
         };
         check_len("must_yield", plan.queries.len(), must_yield.len())?;
         let mut plan = self.plan.take().expect("checked above");
+        self.answer_yields(&mut plan, must_yield);
+        let out = self.step_fleet(&plan, dt_s)?;
+        let next = out.next.as_ref().expect("dt was given");
+        let mut r = RouteOutputs::with_capacity(plan.slots.len());
+        for i in 0..plan.slots.len() {
+            self.step_vehicle(&plan, i, &out, next, dt_s, &mut r)?;
+        }
+        Ok(r)
+    }
+
+    /// Stage 1: a vehicle told to give way stops at the line it asked about
+    /// (and holds there while the reason lasts); one told it may go does not.
+    fn answer_yields(&mut self, plan: &mut Plan, must_yield: &[bool]) {
         for (&i, &y) in plan.queries.iter().zip(must_yield) {
             let d = self.driven[plan.slots[i] as usize]
                 .as_mut()
@@ -110,6 +130,11 @@ impl RouteFleet {
                 d.holding = None;
             }
         }
+    }
+
+    /// Stage 2: the planned vehicles' states and the plan's leaders, stop
+    /// lines and limits packed into the fleet's inputs, stepped over `dt_s`.
+    fn step_fleet(&mut self, plan: &Plan, dt_s: f64) -> Result<FleetOutputs, TrafficError> {
         let n = plan.slots.len();
         let mut cols: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
         for &slot in &plan.slots {
@@ -141,209 +166,151 @@ impl RouteFleet {
                 &cols[4],
             )
         };
-        let out = self.fleet.step(&inputs)?;
-        let next = out.next.expect("dt was given");
-        let mut r = RouteOutputs::with_capacity(n);
-        let st = self.settings;
-        for i in 0..n {
-            let slot = plan.slots[i] as usize;
-            let params = *self.fleet.vehicle_params(slot as i64)?;
-            let d = self.driven[slot]
-                .as_mut()
-                .expect("planned slots are driven");
-            let state = VehicleState {
-                x_m: next.x_m[i],
-                y_m: next.y_m[i],
-                theta_rad: next.theta_rad[i],
-                v_mps: next.v_mps[i],
-                delta_rad: next.delta_rad[i],
-            };
-            let finite = [
-                state.x_m,
-                state.y_m,
-                state.theta_rad,
-                state.v_mps,
-                state.delta_rad,
-                out.s_rear_m[i],
-            ]
-            .iter()
-            .all(|x| x.is_finite());
-            let e = out.lateral_error_m[i];
-            let eth = out.heading_error_rad[i];
-            let (v, th) = (state.v_mps, state.theta_rad);
-            let reach = d.body.reach_m;
-            let (xf, yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());
-            // The front's arc length at the NEW state (the controller's
-            // outputs are of the state it was given, one step behind).
-            let sf_new = if finite {
-                let path = &self
-                    .fleet
-                    .track(self.fleet.vehicle_track(slot as i64)? as i64)?
-                    .path;
-                let (s, seg) =
-                    path.arc_near_from(&Point2::new(xf, yf), d.s_front_m + v * dt_s, d.seg_front);
-                d.seg_front = seg;
-                s
-            } else {
-                f64::NAN
-            };
-            let route = &d.route;
-            let k = if finite { route.piece_at(sf_new) } else { 0 };
-            let piece = route.pieces[k];
-            // Where the front must be on the piece's lane after the
-            // simulator's own movement over the step.
-            let target = piece.lane_pos_start_m + (sf_new - piece.start_m) * piece.scale;
-            let mut pos = target - v * dt_s;
-            let mut sumo_speed = v;
-            let on_lane = e.abs() + piece.offset_m < st.lane_move_lateral_m
-                && eth.abs() < st.lane_move_heading_rad
-                && v >= 0.0;
-            // (distance the simulator must move the front, crosses a lane end)
-            let glide = if on_lane {
-                glide_distance(route, k, target, d.known)
-            } else {
-                None
-            };
-            // Where the simulator will have the front after its movement,
-            // when blendtrack can tell without asking: (lane, position).
-            let mut predicted = None;
-            let mv = if !(out.ok[i] && finite) {
-                Move::Invalid
-            } else if k == route.pieces.len() - 1
-                && route.lane_change.is_none()
-                && sf_new > route.length_m - 2.0 * v * dt_s - 2.0
-            {
-                // About to arrive: a deferred (x, y) move would be applied
-                // after the simulator removed the vehicle.
-                Move::Speed
-            } else if let Some((dist, cross)) =
-                glide.filter(|&(dist, _)| dist - v * piece.scale * dt_s <= GLIDE_BEHIND_M)
-            {
-                // The simulator's own movement carries the front to its new
-                // place at the speed that makes up the distance, kept within
-                // GLIDE_TOLERANCE_* of the vehicle's own speed (in the
-                // simulator's lane coordinates): a simulator a little off
-                // (ahead, or behind by up to GLIDE_BEHIND_M) is brought back
-                // over a few steps; it is never moved backwards.
-                let expect = v * piece.scale;
-                let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect;
-                sumo_speed = (dist / dt_s).clamp((expect - tol).max(0.0), expect + tol);
-                // A standstill is always sent: a held creep speed would let
-                // the simulator drift ahead (0.4 mm a step at 4 mm/s), and
-                // it is never moved back.
-                let hold = !cross
-                    && (sumo_speed - d.sumo_speed).abs() < HOLD_SPEED_MPS
-                    && (sumo_speed > 0.0 || d.sumo_speed == 0.0);
-                if hold {
-                    sumo_speed = d.sumo_speed;
-                }
-                if !cross {
-                    // Exact; after a lane end the simulator's choice of the
-                    // next lane is read back instead.
-                    predicted = d.known.map(|(lane, p)| (lane, p + sumo_speed * dt_s));
-                }
-                if hold {
-                    Move::Hold
-                } else {
-                    Move::Speed
-                }
-            } else if on_lane && pos >= d.body.length_m {
-                if let Some((lane, p)) = d.known {
-                    if lane == piece.lane {
-                        pos = pos.max(p);
-                    }
-                }
-                predicted = Some((piece.lane, pos + v * dt_s));
-                Move::Lane
-            } else {
-                Move::Xy
-            };
-            let mut red = false;
-            let mut due = false;
-            if mv != Move::Invalid {
-                // Red-light crossing: the front passed a stop line whose light is red.
-                if let Some(stop) = route.stops.get(d.next_stop) {
-                    if stop.signal.is_some()
-                        && d.s_front_m < stop.s_m
-                        && stop.s_m <= sf_new
-                        && signal_at(&self.signals, stop) == Signal::Stop
-                    {
-                        red = true;
-                        d.stats.red_light_violations += 1;
-                    }
-                }
-                if let Some(lc) = route.lane_change {
-                    due = piece.edge == lc.edge && piece.lane_index != lc.target_index;
-                }
-                let prev_v = d.state.v_mps;
-                let acc = (v - prev_v) / dt_s;
-                let lat_acc = v * v * state.delta_rad.tan() / params.wheelbase_m;
-                let s = &mut d.stats;
-                let ae = e.abs();
-                s.steps += 1;
-                s.sum_abs_e += ae;
-                s.sum_e2 += ae * ae;
-                s.max_abs_e = s.max_abs_e.max(ae);
-                s.sum_abs_e_rear += out.lateral_error_rear_m[i].abs();
-                s.sum_abs_e_front += out.lateral_error_front_m[i].abs();
-                s.sum_eth2 += eth * eth;
-                s.sum_v += v.abs();
-                s.distance_m += v.abs() * dt_s;
-                s.max_lat_acc = s.max_lat_acc.max(lat_acc.abs());
-                if lat_acc.abs() > st.comfort_lateral_accel_mps2 {
-                    s.time_above_comfort_s += dt_s;
-                }
-                if s.last_acc.is_finite() {
-                    let jerk = (acc - s.last_acc) / dt_s;
-                    s.sum_jerk2 += jerk * jerk;
-                    s.jerk_n += 1;
-                }
-                s.last_acc = acc;
-                if v.abs() > plan.limit[i] * 1.0001 {
-                    s.speed_warnings += 1;
-                }
-                if v < 0.0 {
-                    s.reverse_warnings += 1;
-                }
-                if s.steps % st.sample_every == 0 {
-                    self.samples
-                        .push([out.curvature_per_m[i].abs(), v.abs(), ae, lat_acc.abs()]);
-                }
-                r.accel_mps2.push(acc);
-                d.state = state;
-                d.s_front_m = sf_new;
-                d.known = predicted;
-                d.sumo_speed = sumo_speed;
-            } else {
-                r.accel_mps2.push(f64::NAN);
-            }
-            r.moves.push(mv);
-            r.lane.push(piece.lane);
-            r.lane_pos_m.push(pos);
-            r.edge.push(piece.edge);
-            r.lane_index.push(piece.lane_index);
-            r.x_front_m.push(xf);
-            r.y_front_m.push(yf);
-            r.angle_deg
-                .push((90.0 - wrap_angle(th).to_degrees()).rem_euclid(360.0));
-            r.x_m.push(state.x_m);
-            r.y_m.push(state.y_m);
-            r.theta_rad.push(th);
-            r.v_mps.push(v);
-            r.delta_rad.push(state.delta_rad);
-            r.lateral_error_m.push(e);
-            r.heading_error_rad.push(eth);
-            r.s_rear_m.push(out.s_rear_m[i]);
-            r.curvature_per_m.push(out.curvature_per_m[i]);
-            r.virtual_obstacle_m.push(out.virtual_obstacle_m[i]);
-            r.red_light.push(red);
-            r.lane_change_due.push(due);
-            // Read back where the prediction ends, and now and then to check it.
-            let verify = st.verify_every > 0 && d.stats.steps % st.verify_every == 0;
-            r.read_position
-                .push(mv != Move::Invalid && (d.known.is_none() || verify));
-            r.sumo_speed_mps.push(sumo_speed);
-        }
-        Ok(r)
+        Ok(self.fleet.step(&inputs)?)
     }
+
+    /// Stage 3, per vehicle: where its front is on its track after the
+    /// step, the move that puts it into the simulator, a red-light
+    /// crossing, its statistics, and its row of the outputs.
+    fn step_vehicle(
+        &mut self,
+        plan: &Plan,
+        i: usize,
+        out: &FleetOutputs,
+        next: &NextStates,
+        dt_s: f64,
+        r: &mut RouteOutputs,
+    ) -> Result<(), TrafficError> {
+        let slot = plan.slots[i] as usize;
+        let params = *self.fleet.vehicle_params(slot as i64)?;
+        let d = self.driven[slot]
+            .as_mut()
+            .expect("planned slots are driven");
+        let state = VehicleState {
+            x_m: next.x_m[i],
+            y_m: next.y_m[i],
+            theta_rad: next.theta_rad[i],
+            v_mps: next.v_mps[i],
+            delta_rad: next.delta_rad[i],
+        };
+        let finite = [
+            state.x_m,
+            state.y_m,
+            state.theta_rad,
+            state.v_mps,
+            state.delta_rad,
+            out.s_rear_m[i],
+        ]
+        .iter()
+        .all(|x| x.is_finite());
+        let (v, th) = (state.v_mps, state.theta_rad);
+        let reach = d.body.reach_m;
+        let (xf, yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());
+        // The front's arc length at the NEW state (the controller's
+        // outputs are of the state it was given, one step behind).
+        let sf_new = if finite {
+            front_arc_after(&self.fleet, slot, d, Point2::new(xf, yf), v * dt_s)?
+        } else {
+            f64::NAN
+        };
+        let k = if finite { d.route.piece_at(sf_new) } else { 0 };
+        let piece = d.route.pieces[k];
+        let motion = Motion {
+            usable: out.ok[i] && finite,
+            lateral_error_m: out.lateral_error_m[i],
+            heading_error_rad: out.heading_error_rad[i],
+            v_mps: v,
+            s_front_m: sf_new,
+            dt_s,
+        };
+        let st = self.settings;
+        let p = choose_move(d, k, &st, &motion);
+        let mut red = false;
+        let mut due = false;
+        if p.mv != Move::Invalid {
+            red = crossed_red(&self.signals, d, sf_new);
+            if red {
+                d.stats.red_light_violations += 1;
+            }
+            if let Some(lc) = d.route.lane_change {
+                due = piece.edge == lc.edge && piece.lane_index != lc.target_index;
+            }
+            let acc = (v - d.state.v_mps) / dt_s;
+            let step = StepRecord {
+                lateral_error_m: motion.lateral_error_m,
+                lateral_error_rear_m: out.lateral_error_rear_m[i],
+                lateral_error_front_m: out.lateral_error_front_m[i],
+                heading_error_rad: motion.heading_error_rad,
+                v_mps: v,
+                accel_mps2: acc,
+                lateral_accel_mps2: v * v * state.delta_rad.tan() / params.wheelbase_m,
+                curvature_per_m: out.curvature_per_m[i],
+                speed_limit_mps: plan.limit[i],
+                dt_s,
+            };
+            if let Some(sample) = d.stats.add_step(&step, &st) {
+                self.samples.push(sample);
+            }
+            r.accel_mps2.push(acc);
+            d.state = state;
+            d.s_front_m = sf_new;
+            d.known = p.predicted;
+            d.sumo_speed = p.sumo_speed;
+        } else {
+            r.accel_mps2.push(f64::NAN);
+        }
+        r.moves.push(p.mv);
+        r.lane.push(piece.lane);
+        r.lane_pos_m.push(p.pos);
+        r.edge.push(piece.edge);
+        r.lane_index.push(piece.lane_index);
+        r.x_front_m.push(xf);
+        r.y_front_m.push(yf);
+        r.angle_deg
+            .push((90.0 - wrap_angle(th).to_degrees()).rem_euclid(360.0));
+        r.x_m.push(state.x_m);
+        r.y_m.push(state.y_m);
+        r.theta_rad.push(th);
+        r.v_mps.push(v);
+        r.delta_rad.push(state.delta_rad);
+        r.lateral_error_m.push(motion.lateral_error_m);
+        r.heading_error_rad.push(motion.heading_error_rad);
+        r.s_rear_m.push(out.s_rear_m[i]);
+        r.curvature_per_m.push(out.curvature_per_m[i]);
+        r.virtual_obstacle_m.push(out.virtual_obstacle_m[i]);
+        r.red_light.push(red);
+        r.lane_change_due.push(due);
+        // Read back where the prediction ends, and now and then to check it.
+        let verify = st.verify_every > 0 && d.stats.steps % st.verify_every == 0;
+        r.read_position
+            .push(p.mv != Move::Invalid && (d.known.is_none() || verify));
+        r.sumo_speed_mps.push(p.sumo_speed);
+        Ok(())
+    }
+}
+
+/// The arc length of vehicle `d`'s front at `front`, its new place after
+/// about `advance` metres (the look-up starts from the old one's segment).
+fn front_arc_after(
+    fleet: &Fleet,
+    slot: usize,
+    d: &mut Driven,
+    front: Point2<f64>,
+    advance: f64,
+) -> Result<f64, TrafficError> {
+    let path = &fleet.track(fleet.vehicle_track(slot as i64)? as i64)?.path;
+    let (s, seg) = path.arc_near_from(&front, d.s_front_m + advance, d.seg_front);
+    d.seg_front = seg;
+    Ok(s)
+}
+
+/// Stage 4: the front passed, over the step, the stop line ahead while its
+/// light is red (from arc length `d.s_front_m` to `s_new`).
+fn crossed_red(signals: &[Vec<Signal>], d: &Driven, s_new: f64) -> bool {
+    d.route.stops.get(d.next_stop).is_some_and(|stop| {
+        stop.signal.is_some()
+            && d.s_front_m < stop.s_m
+            && stop.s_m <= s_new
+            && signal_at(signals, stop) == Signal::Stop
+    })
 }
