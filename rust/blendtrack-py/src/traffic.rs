@@ -10,10 +10,10 @@
 use crate::config::{ControllerConfig, VehicleParams};
 use crate::errors::{config_error, fleet_error, input_error};
 use crate::path::Path;
-use blendtrack::VehicleState;
+use blendtrack::{StatValue, VehicleState};
 use blendtrack_traffic::{
-    Body, LaneChangeDue, Move, Observations, Piece, Route, RouteFleet as CoreRouteFleet, Signal,
-    SoftLeaders, StopLine, TrafficError, TrafficSettings,
+    Body, DriveStats, LaneChangeDue, Move, Observations, Piece, Route,
+    RouteFleet as CoreRouteFleet, Signal, SoftLeaders, StopLine, TrafficError, TrafficSettings,
 };
 use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
@@ -50,28 +50,16 @@ fn u32_of(name: &str, i: usize, x: i64) -> PyResult<u32> {
     u32::try_from(x).map_err(|_| input_error(format!("{name}[{i}] = {x}: must be in [0, 2^32)")))
 }
 
-fn stats_dict<'py>(
-    py: Python<'py>,
-    s: &blendtrack_traffic::DriveStats,
-) -> PyResult<Bound<'py, PyDict>> {
+/// A vehicle's statistics as a dict, every entry the traffic crate names
+/// (raw sums and maxima, finished means and RMS, counts), built generically.
+fn stats_dict<'py>(py: Python<'py>, s: &DriveStats) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    d.set_item("steps", s.steps)?;
-    d.set_item("sum_abs_e", s.sum_abs_e)?;
-    d.set_item("sum_e2", s.sum_e2)?;
-    d.set_item("max_abs_e", s.max_abs_e)?;
-    d.set_item("sum_abs_e_rear", s.sum_abs_e_rear)?;
-    d.set_item("sum_abs_e_front", s.sum_abs_e_front)?;
-    d.set_item("sum_eth2", s.sum_eth2)?;
-    d.set_item("sum_v", s.sum_v)?;
-    d.set_item("distance_m", s.distance_m)?;
-    d.set_item("max_lat_acc", s.max_lat_acc)?;
-    d.set_item("time_above_comfort_s", s.time_above_comfort_s)?;
-    d.set_item("sum_jerk2", s.sum_jerk2)?;
-    d.set_item("jerk_n", s.jerk_n)?;
-    d.set_item("last_acc", s.last_acc)?;
-    d.set_item("speed_warnings", s.speed_warnings)?;
-    d.set_item("reverse_warnings", s.reverse_warnings)?;
-    d.set_item("red_light_violations", s.red_light_violations)?;
+    for (key, value) in s.entries() {
+        match value {
+            StatValue::Count(n) => d.set_item(key, n)?,
+            StatValue::Value(x) => d.set_item(key, x)?,
+        }
+    }
     Ok(d)
 }
 

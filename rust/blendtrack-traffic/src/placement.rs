@@ -315,7 +315,11 @@ mod tests {
             // The speed sent is the vehicle's own (here scale 1).
             assert!((out.sumo_speed_mps[0] - out.v_mps[0]).abs() <= HOLD_SPEED_MPS + 1e-9);
             // Checked every verify_every steps, else not asked for.
-            assert_eq!(read, f.stats(a).unwrap().steps % 10 == 0, "step {k}");
+            assert_eq!(
+                read,
+                f.stats(a).unwrap().tracking.steps % 10 == 0,
+                "step {k}"
+            );
         }
         assert!(counts[Move::Speed as usize] > 20, "{counts:?}");
         assert!(

@@ -281,7 +281,7 @@ impl RouteFleet {
         r.red_light.push(red);
         r.lane_change_due.push(due);
         // Read back where the prediction ends, and now and then to check it.
-        let verify = st.verify_every > 0 && d.stats.steps % st.verify_every == 0;
+        let verify = st.verify_every > 0 && d.stats.tracking.steps % st.verify_every == 0;
         r.read_position
             .push(p.mv != Move::Invalid && (d.known.is_none() || verify));
         r.sumo_speed_mps.push(p.sumo_speed);

@@ -8,10 +8,11 @@
 //! on virtual borders and a ray cast ([`longitudinal`]), the reference
 //! [`path`] they track, a kinematic bicycle [`vehicle`] with actuator limits,
 //! delay and sensor noise, a closed-loop [`sim`]ulator with its [`metrics`],
-//! and a batch [`fleet`] stepping many vehicles in one call. It knows nothing
-//! of Python or of any traffic simulator: the `blendtrack-traffic` crate
-//! (road routes among other traffic), the binding crate and the Python
-//! package build on it.
+//! one accumulator of a drive's statistics ([`stats`]), and a batch
+//! [`fleet`] stepping many vehicles in one call. It knows nothing of Python
+//! or of any traffic simulator: the `blendtrack-traffic` crate (road routes
+//! among other traffic), the binding crate and the Python package build on
+//! it.
 //!
 //! Conventions (SPEC §1): SI units, world frame x east / y north, heading CCW
 //! from +x in (-pi, pi], steering > 0 turns left, lateral error > 0 on the
@@ -30,6 +31,7 @@ pub mod longitudinal;
 pub mod metrics;
 pub mod path;
 pub mod sim;
+pub mod stats;
 pub mod vehicle;
 
 pub use config::{Config, ControllerConfig, Experiment, ExperimentSet, LateralKind};
@@ -41,4 +43,5 @@ pub use longitudinal::{Corridor, Obstacle};
 pub use metrics::{run_metrics, trace_metrics, RunMetrics, Series, WindowMetrics};
 pub use path::{wrap_angle, Path, Projection, Widths};
 pub use sim::{simulate, SimOptions, Trace};
+pub use stats::{StatValue, TrackingSample, TrackingStats};
 pub use vehicle::{Command, Direction, NoiseModel, Sensor, Vehicle, VehicleParams, VehicleState};
