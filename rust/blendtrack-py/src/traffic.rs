@@ -19,8 +19,7 @@ use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
+use rustc_hash::FxHashMap;
 
 type F64In<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
 type I64In<'py> = PyArrayLike1<'py, i64, AllowTypeChange>;
@@ -75,8 +74,10 @@ fn stats_dict<'py>(py: Python<'py>, s: &DriveStats) -> PyResult<Bound<'py, PyDic
 pub struct RouteFleet {
     inner: CoreRouteFleet,
     /// The simulator's vehicle ids of the slots that were given one, both
-    /// ways (`plan_sumo` reads leaders by id).
-    slot_of: HashMap<String, i64, BuildHasherDefault<Fnv>>,
+    /// ways (`plan_sumo` reads leaders by id). SUMO's vehicle ids are short
+    /// strings hashed a few thousand times a step: FxHash (rustc-hash), not
+    /// the DoS-resistant, slower SipHash.
+    slot_of: FxHashMap<String, i64>,
     name_of: Vec<Option<String>>,
     /// What `leaders_on_lanes` found for the slots it was given, kept for
     /// the next `plan_sumo` with the same slots: (slots, leader per slot).
@@ -85,28 +86,6 @@ pub struct RouteFleet {
 
 /// A leader read off a lane list: (its slot, the gap in m), or None.
 type ListedLeader = Option<(i64, f64)>;
-
-/// FNV-1a: SUMO's vehicle ids are short strings hashed a few thousand times
-/// a step; the default SipHash (DoS-resistant, slower) is not needed here.
-#[derive(Default)]
-struct Fnv(u64);
-
-impl Hasher for Fnv {
-    fn write(&mut self, bytes: &[u8]) {
-        let mut h = if self.0 == 0 {
-            0xcbf2_9ce4_8422_2325
-        } else {
-            self.0
-        };
-        for &b in bytes {
-            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-        }
-        self.0 = h;
-    }
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
 
 #[pymethods]
 impl RouteFleet {
@@ -153,7 +132,7 @@ impl RouteFleet {
         })?;
         Ok(RouteFleet {
             inner,
-            slot_of: HashMap::default(),
+            slot_of: FxHashMap::default(),
             name_of: Vec::new(),
             listed: None,
         })
