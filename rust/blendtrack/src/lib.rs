@@ -30,6 +30,7 @@ pub mod lateral;
 pub mod longitudinal;
 pub mod metrics;
 pub mod path;
+pub mod polyline;
 pub mod sim;
 pub mod stats;
 pub mod vehicle;
