@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import pathlib
 
 import numpy as np
 import pandas as pd
@@ -164,3 +165,38 @@ def test_controller_config_paper_names_and_toml_round_trip() -> None:
         c.validate()
     with pytest.raises(blendtrack.ConfigError, match="wheelbase_m"):
         blendtrack.VehicleParams(wheelbase_m=0.0)
+
+
+def test_config_attributes_are_the_core_keys_read_and_set_by_name(tmp_path: pathlib.Path) -> None:
+    c = blendtrack.ControllerConfig()
+    # Every key of the core type is an attribute, with its TOML value.
+    assert set(c.to_dict()) <= set(dir(c))
+    assert {k: getattr(c, k) for k in c.to_dict()} == c.to_dict()
+    c.preferred_speed = 10  # an int for a number: stored as a float
+    assert c.preferred_speed == 10.0 and isinstance(c.preferred_speed, float)
+    assert c == blendtrack.ControllerConfig(preferred_speed=10.0)
+    c.use_path_widths = False
+    assert c.to_dict()["use_path_widths"] is False
+    with pytest.raises(TypeError):
+        c.preferred_speed = "fast"
+    with pytest.raises(AttributeError, match="no_such_key"):
+        c.no_such_key = 1.0
+    with pytest.raises(AttributeError, match="no_such_key"):
+        _ = c.no_such_key
+    # Out of range: kept until used, then a ConfigError naming the key.
+    c.lat_blend_factor = 2.0
+    assert c.lat_blend_factor == 2.0
+    with pytest.raises(blendtrack.ConfigError, match="lat_blend_factor"):
+        c.to_toml()
+    v = blendtrack.VehicleParams()
+    v.wheelbase_m = 3.1
+    assert v.to_dict()["wheelbase_m"] == 3.1 and "wheelbase_m=3.1" in repr(v)
+    # The keys a file's [controller] table sets (none without the table).
+    f = tmp_path / "c.toml"
+    f.write_text("[controller]\npreferred_speed = 8.0\nlat_blend_factor = 0.2\n[vehicle]\nwheelbase_m = 3.0\n")
+    assert blendtrack.ControllerConfig.keys_in_file(f) == {"preferred_speed", "lat_blend_factor"}
+    f.write_text("preferred_speed = 8.0\n")
+    assert blendtrack.ControllerConfig.keys_in_file(str(f)) == set()
+    f.write_text("[controller\n")
+    with pytest.raises(blendtrack.ConfigError):
+        blendtrack.ControllerConfig.keys_in_file(f)

@@ -13,10 +13,9 @@
 from __future__ import annotations
 
 import os
-import tomllib
 from pathlib import Path
-from typing import Any
 
+from blendtrack import ControllerConfig
 from blendtrack.sumo.runner import RunOptions, RunResult, SumoRun
 from blendtrack.sumo.scenario import Scenario, ScenarioError, available_scenarios, resolve_scenario
 
@@ -36,9 +35,7 @@ __all__ = [
 def config_keys(file: str | Path) -> set[str]:
     """Keys set in the ``[controller]`` table of a config file (to tell a
     user's explicit ``path_width_m`` or ``preferred_speed`` from the defaults)."""
-    data: dict[str, Any] = tomllib.loads(Path(file).read_text())
-    table = data.get("controller", {})
-    return set(table) if isinstance(table, dict) else set()
+    return ControllerConfig.keys_in_file(file)
 
 
 def run_scenario(scenario: Scenario, options: RunOptions, out: str | os.PathLike[str]) -> RunResult:

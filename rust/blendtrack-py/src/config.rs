@@ -1,19 +1,23 @@
-//! `ControllerConfig` and `VehicleParams` for Python: plain attribute holders
-//! under the paper's names, converted to the core types (and validated there)
-//! when they are used.
+//! `ControllerConfig` and `VehicleParams` for Python: the core types held as
+//! their serde image ([`Fields`]: a TOML table with every key of the core
+//! type), converted to the core types (and validated there) when they are
+//! used. No field is listed here: the core's structs are the one definition,
+//! and attributes are read and set by name through the table.
 //!
-//! Attributes can be set freely; the core validates them on use and on
-//! `validate()`, with an error naming the key. `direction` is "forward" or
-//! "backward", `lateral_controller` is "blend", "stanley" or "pure_pursuit".
-//! Keyword constructors, `from_toml` and `to_toml` go through the core's serde
+//! Attributes can be set freely (to a value of the key's type: number,
+//! bool or string); the core validates them on use and on `validate()`,
+//! with an error naming the key. `direction` is "forward" or "backward",
+//! `lateral_controller` is "blend", "stanley" or "pure_pursuit". Keyword
+//! constructors, `from_toml` and `to_toml` go through the core's serde
 //! types, so unknown keys are `ConfigError`s that name them.
 
 use crate::errors::{config_error, ConfigError as PyConfigError};
-use blendtrack::config::{Config as CoreConfig, ControllerConfig as Core, LateralKind};
-use blendtrack::vehicle::{Direction, VehicleParams as CoreVehicle};
-use pyo3::exceptions::PyTypeError;
+use blendtrack::config::{Config as CoreConfig, ControllerConfig as Core};
+use blendtrack::vehicle::VehicleParams as CoreVehicle;
+use pyo3::exceptions::{PyAttributeError, PyTypeError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PyString};
+use pyo3::types::{PyBool, PyDict, PyFloat, PyInt, PySet, PyString};
+use serde::{de::DeserializeOwned, Serialize};
 
 /// Python dict -> TOML table (bool, int, float, str values).
 pub(crate) fn dict_to_toml(d: Option<&Bound<'_, PyDict>>) -> PyResult<toml::Table> {
@@ -104,79 +108,152 @@ fn read_file(file: &str) -> PyResult<String> {
         .map_err(|e| PyConfigError::new_err(format!("cannot read config file {file}: {e}")))
 }
 
+/// A core config type's values by key: its TOML image, every key present
+/// (the core serializes all of its fields). Read and written by name; turned
+/// back into the core type, and validated there, on use.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Fields(toml::Table);
+
+impl Fields {
+    fn of<T: Serialize>(v: &T) -> PyResult<Fields> {
+        toml::Table::try_from(v)
+            .map(Fields)
+            .map_err(|e| PyConfigError::new_err(e.to_string()))
+    }
+
+    /// The core value (deserialized, then checked by `validate`). A value
+    /// the core type cannot hold (a name that is not one of its choices) is a
+    /// ConfigError naming its key.
+    fn to_core<T: DeserializeOwned + Serialize + Default>(
+        &self,
+        what: &str,
+        validate: impl Fn(&T) -> Result<(), blendtrack::ConfigError>,
+    ) -> PyResult<T> {
+        let v: T = from_table(self.0.clone(), what).map_err(|e| self.name_bad_key::<T>(what, e))?;
+        validate(&v).map_err(config_error)?;
+        Ok(v)
+    }
+
+    /// `e`, or better the error of the first key that alone fails to
+    /// deserialize (over the defaults), with the key and its value.
+    fn name_bad_key<T: DeserializeOwned + Serialize + Default>(
+        &self,
+        what: &str,
+        e: PyErr,
+    ) -> PyErr {
+        let Ok(Fields(defaults)) = Fields::of(&T::default()) else {
+            return e;
+        };
+        for (key, value) in &self.0 {
+            let mut one = defaults.clone();
+            one.insert(key.clone(), value.clone());
+            if let Err(err) = T::deserialize(toml::Value::Table(one)) {
+                return PyConfigError::new_err(format!(
+                    "{what}: config key `{key}` = {value}: {}",
+                    err.to_string().trim_end().replace('\n', " | ")
+                ));
+            }
+        }
+        e
+    }
+
+    fn no_attribute(class: &str, name: &str) -> PyErr {
+        PyAttributeError::new_err(format!("'{class}' object has no attribute '{name}'"))
+    }
+
+    fn get<'py>(&self, py: Python<'py>, class: &str, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        match self.0.get(name) {
+            Some(v) => toml_to_py(py, v),
+            None => Err(Self::no_attribute(class, name)),
+        }
+    }
+
+    /// Sets a key to a value of its type (a number for a number, ...): the
+    /// value itself is checked on use, as the core checks it.
+    fn set(&mut self, class: &str, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        let slot = self
+            .0
+            .get_mut(name)
+            .ok_or_else(|| Self::no_attribute(class, name))?;
+        *slot = match slot {
+            toml::Value::Float(_) => toml::Value::Float(value.extract()?),
+            toml::Value::Integer(_) => toml::Value::Integer(value.extract()?),
+            toml::Value::Boolean(_) => toml::Value::Boolean(value.extract()?),
+            toml::Value::String(_) => toml::Value::String(value.extract()?),
+            other => {
+                return Err(PyTypeError::new_err(format!(
+                    "`{name}` holds a {} and cannot be set",
+                    other.type_str()
+                )))
+            }
+        };
+        Ok(())
+    }
+
+    /// `Class(key=value, ...)` over `keys` (`...` closes the partial list),
+    /// or over every key in the order the core declares its fields.
+    fn repr<T: Serialize + Default>(&self, class: &str, keys: Option<&[&str]>) -> String {
+        // The core's own serialization lists its fields in declaration order.
+        let order = toml::to_string(&T::default()).unwrap_or_default();
+        let all: Vec<&str> = order
+            .lines()
+            .filter_map(|l| l.split_once(" = ").map(|(k, _)| k))
+            .collect();
+        let shown = keys
+            .unwrap_or(&all)
+            .iter()
+            .filter_map(|&k| {
+                let v = match self.0.get(k)? {
+                    toml::Value::Float(x) => x.to_string(),
+                    toml::Value::String(s) => format!("{s:?}"),
+                    other => other.to_string(),
+                };
+                Some(format!("{k}={v}"))
+            })
+            .collect::<Vec<_>>()
+            .join(", ");
+        let more = if keys.is_some() { ", ..." } else { "" };
+        format!("{class}({shown}{more})")
+    }
+
+    fn dir(slf: &Bound<'_, PyAny>, fields: &Fields) -> PyResult<Vec<String>> {
+        let mut names: Vec<String> = slf.get_type().dir()?.extract()?;
+        names.extend(fields.0.keys().cloned());
+        names.sort_unstable();
+        Ok(names)
+    }
+}
+
+/// The keys the `[table]` of a TOML file sets (none when it has no such table).
+fn keys_in_file(file: &str, table: &str) -> PyResult<Vec<String>> {
+    let doc: toml::Table = read_file(file)?.parse().map_err(|e: toml::de::Error| {
+        PyConfigError::new_err(format!(
+            "{file}: {}",
+            e.to_string().trim_end().replace('\n', " | ")
+        ))
+    })?;
+    Ok(match doc.get(table) {
+        Some(toml::Value::Table(t)) => t.keys().cloned().collect(),
+        _ => Vec::new(),
+    })
+}
+
 /// Parameters of the lateral and longitudinal controllers (the paper's
-/// Table 1 names plus the tuning the paper leaves open).
-#[pyclass(module = "blendtrack", get_all, set_all, eq, from_py_object)]
+/// Table 1 names plus the tuning the paper leaves open): the core's
+/// `ControllerConfig`, attribute by attribute.
+#[pyclass(module = "blendtrack", eq, from_py_object)]
 #[derive(Debug, Clone, PartialEq)]
 pub struct ControllerConfig {
-    pub lat_blend_factor: f64,
-    pub acceleration_exp: f64,
-    pub deceleration_factor: f64,
-    pub max_deceleration: f64,
-    pub max_obs_deceleration: f64,
-    pub path_width_m: f64,
-    pub preferred_acceleration: f64,
-    pub preferred_deceleration: f64,
-    pub preferred_speed: f64,
-    pub preferred_stop_dist: f64,
-    pub reaction_time: f64,
-    pub direction: String,
-    pub lateral_controller: String,
-    pub stanley_gain: f64,
-    pub stanley_gain_reverse: f64,
-    pub stanley_softening_mps: f64,
-    pub target_distance_min_m: f64,
-    pub target_distance_gain_s: f64,
-    pub curvature_lookahead_gain_s: f64,
-    pub pure_pursuit_gain_s: f64,
-    pub pure_pursuit_min_lookahead_m: f64,
-    pub use_path_widths: bool,
-    pub border_margin_m: f64,
-    pub ray_horizon_m: f64,
+    fields: Fields,
 }
 
-fn direction_name(d: Direction) -> &'static str {
-    match d {
-        Direction::Forward => "forward",
-        Direction::Backward => "backward",
-    }
-}
-
-fn lateral_name(k: LateralKind) -> &'static str {
-    match k {
-        LateralKind::Blend => "blend",
-        LateralKind::Stanley => "stanley",
-        LateralKind::PurePursuit => "pure_pursuit",
-    }
-}
+const CONTROLLER: &str = "ControllerConfig";
 
 impl From<&Core> for ControllerConfig {
     fn from(c: &Core) -> Self {
+        // A core config always serializes (numbers, bools and names).
         ControllerConfig {
-            lat_blend_factor: c.lat_blend_factor,
-            acceleration_exp: c.acceleration_exp,
-            deceleration_factor: c.deceleration_factor,
-            max_deceleration: c.max_deceleration,
-            max_obs_deceleration: c.max_obs_deceleration,
-            path_width_m: c.path_width_m,
-            preferred_acceleration: c.preferred_acceleration,
-            preferred_deceleration: c.preferred_deceleration,
-            preferred_speed: c.preferred_speed,
-            preferred_stop_dist: c.preferred_stop_dist,
-            reaction_time: c.reaction_time,
-            direction: direction_name(c.direction).to_string(),
-            lateral_controller: lateral_name(c.lateral_controller).to_string(),
-            stanley_gain: c.stanley_gain,
-            stanley_gain_reverse: c.stanley_gain_reverse,
-            stanley_softening_mps: c.stanley_softening_mps,
-            target_distance_min_m: c.target_distance_min_m,
-            target_distance_gain_s: c.target_distance_gain_s,
-            curvature_lookahead_gain_s: c.curvature_lookahead_gain_s,
-            pure_pursuit_gain_s: c.pure_pursuit_gain_s,
-            pure_pursuit_min_lookahead_m: c.pure_pursuit_min_lookahead_m,
-            use_path_widths: c.use_path_widths,
-            border_margin_m: c.border_margin_m,
-            ray_horizon_m: c.ray_horizon_m,
+            fields: Fields::of(c).unwrap_or(Fields(toml::Table::new())),
         }
     }
 }
@@ -184,61 +261,13 @@ impl From<&Core> for ControllerConfig {
 impl ControllerConfig {
     /// The validated core configuration.
     pub(crate) fn to_core(&self) -> PyResult<Core> {
-        let direction = match self.direction.as_str() {
-            "forward" => Direction::Forward,
-            "backward" => Direction::Backward,
-            other => {
-                return Err(PyConfigError::new_err(format!(
-                    "config key `direction` = {other:?}: must be \"forward\" or \"backward\""
-                )))
-            }
-        };
-        let lateral_controller = match self.lateral_controller.as_str() {
-            "blend" => LateralKind::Blend,
-            "stanley" => LateralKind::Stanley,
-            "pure_pursuit" => LateralKind::PurePursuit,
-            other => {
-                return Err(PyConfigError::new_err(format!(
-                    "config key `lateral_controller` = {other:?}: must be \"blend\", \"stanley\" or \"pure_pursuit\""
-                )))
-            }
-        };
-        let c = Core {
-            lat_blend_factor: self.lat_blend_factor,
-            acceleration_exp: self.acceleration_exp,
-            deceleration_factor: self.deceleration_factor,
-            max_deceleration: self.max_deceleration,
-            max_obs_deceleration: self.max_obs_deceleration,
-            path_width_m: self.path_width_m,
-            preferred_acceleration: self.preferred_acceleration,
-            preferred_deceleration: self.preferred_deceleration,
-            preferred_speed: self.preferred_speed,
-            preferred_stop_dist: self.preferred_stop_dist,
-            reaction_time: self.reaction_time,
-            direction,
-            lateral_controller,
-            stanley_gain: self.stanley_gain,
-            stanley_gain_reverse: self.stanley_gain_reverse,
-            stanley_softening_mps: self.stanley_softening_mps,
-            target_distance_min_m: self.target_distance_min_m,
-            target_distance_gain_s: self.target_distance_gain_s,
-            curvature_lookahead_gain_s: self.curvature_lookahead_gain_s,
-            pure_pursuit_gain_s: self.pure_pursuit_gain_s,
-            pure_pursuit_min_lookahead_m: self.pure_pursuit_min_lookahead_m,
-            use_path_widths: self.use_path_widths,
-            border_margin_m: self.border_margin_m,
-            ray_horizon_m: self.ray_horizon_m,
-        };
-        c.validate().map_err(config_error)?;
-        Ok(c)
+        self.fields.to_core(CONTROLLER, Core::validate)
     }
 
     fn with_kwargs(base: &Core, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let mut t =
-            toml::Table::try_from(base).map_err(|e| PyConfigError::new_err(e.to_string()))?;
+        let mut t = Fields::of(base)?.0;
         t.extend(dict_to_toml(kwargs)?);
-        let c: Core = from_table(t, "ControllerConfig")?;
-        c.validate().map_err(config_error)?;
+        let c: Core = Fields(t).to_core(CONTROLLER, Core::validate)?;
         Ok(Self::from(&c))
     }
 }
@@ -251,6 +280,24 @@ impl ControllerConfig {
     #[pyo3(signature = (**kwargs))]
     fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         Self::with_kwargs(&Core::default(), kwargs)
+    }
+
+    fn __getattr__<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        self.fields.get(py, CONTROLLER, name)
+    }
+
+    fn __setattr__(&mut self, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.fields.set(CONTROLLER, name, value)
+    }
+
+    fn __delattr__(&mut self, name: &str) -> PyResult<()> {
+        Err(PyAttributeError::new_err(format!(
+            "cannot delete attribute '{name}' of '{CONTROLLER}'"
+        )))
+    }
+
+    fn __dir__(slf: &Bound<'_, Self>) -> PyResult<Vec<String>> {
+        Fields::dir(slf.as_any(), &slf.borrow().fields)
     }
 
     /// A validated copy with some keys changed.
@@ -270,8 +317,7 @@ impl ControllerConfig {
     #[pyo3(signature = (text, source = "<string>"))]
     fn from_toml(text: &str, source: &str) -> PyResult<Self> {
         let t = parse_section(text, source, "controller")?;
-        let c: Core = from_table(t, source)?;
-        c.validate().map_err(config_error)?;
+        let c: Core = Fields(t).to_core(source, Core::validate)?;
         Ok(Self::from(&c))
     }
 
@@ -280,6 +326,13 @@ impl ControllerConfig {
     fn load(file: std::path::PathBuf) -> PyResult<Self> {
         let name = file.display().to_string();
         Self::from_toml(&read_file(&name)?, &name)
+    }
+
+    /// The keys a config file sets in its `[controller]` table (to tell a
+    /// user's explicit values from the defaults); empty without the table.
+    #[staticmethod]
+    fn keys_in_file<'py>(py: Python<'py>, file: std::path::PathBuf) -> PyResult<Bound<'py, PySet>> {
+        PySet::new(py, keys_in_file(&file.display().to_string(), "controller")?)
     }
 
     /// The keys as TOML (a `[controller]` table when `table` is true).
@@ -300,10 +353,13 @@ impl ControllerConfig {
     }
 
     fn __repr__(&self) -> String {
-        format!(
-            "ControllerConfig(lat_blend_factor={}, direction={:?}, lateral_controller={:?}, preferred_speed={}, ...)",
-            self.lat_blend_factor, self.direction, self.lateral_controller, self.preferred_speed
-        )
+        let keys = [
+            "lat_blend_factor",
+            "direction",
+            "lateral_controller",
+            "preferred_speed",
+        ];
+        self.fields.repr::<Core>(CONTROLLER, Some(&keys))
     }
 
     fn __copy__(&self) -> Self {
@@ -323,51 +379,35 @@ impl ControllerConfig {
     }
 }
 
-/// Physical limits of the vehicle (wheelbase, steering, acceleration, speed).
-#[pyclass(module = "blendtrack", get_all, set_all, eq, from_py_object)]
+/// Physical limits of the vehicle (wheelbase, steering, acceleration,
+/// speed): the core's `VehicleParams`, attribute by attribute.
+#[pyclass(module = "blendtrack", eq, from_py_object)]
 #[derive(Debug, Clone, PartialEq)]
 pub struct VehicleParams {
-    pub wheelbase_m: f64,
-    pub max_steering_deg: f64,
-    pub max_steering_rate_deg_s: f64,
-    pub max_acceleration_mps2: f64,
-    pub max_braking_mps2: f64,
-    pub max_speed_mps: f64,
+    fields: Fields,
 }
+
+const VEHICLE: &str = "VehicleParams";
 
 impl From<&CoreVehicle> for VehicleParams {
     fn from(v: &CoreVehicle) -> Self {
+        // Vehicle parameters always serialize (numbers).
         VehicleParams {
-            wheelbase_m: v.wheelbase_m,
-            max_steering_deg: v.max_steering_deg,
-            max_steering_rate_deg_s: v.max_steering_rate_deg_s,
-            max_acceleration_mps2: v.max_acceleration_mps2,
-            max_braking_mps2: v.max_braking_mps2,
-            max_speed_mps: v.max_speed_mps,
+            fields: Fields::of(v).unwrap_or(Fields(toml::Table::new())),
         }
     }
 }
 
 impl VehicleParams {
     pub(crate) fn to_core(&self) -> PyResult<CoreVehicle> {
-        let v = CoreVehicle {
-            wheelbase_m: self.wheelbase_m,
-            max_steering_deg: self.max_steering_deg,
-            max_steering_rate_deg_s: self.max_steering_rate_deg_s,
-            max_acceleration_mps2: self.max_acceleration_mps2,
-            max_braking_mps2: self.max_braking_mps2,
-            max_speed_mps: self.max_speed_mps,
-        };
-        blendtrack::config::validate_vehicle(&v).map_err(config_error)?;
-        Ok(v)
+        self.fields
+            .to_core(VEHICLE, blendtrack::config::validate_vehicle)
     }
 
     fn with_kwargs(base: &CoreVehicle, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let mut t =
-            toml::Table::try_from(base).map_err(|e| PyConfigError::new_err(e.to_string()))?;
+        let mut t = Fields::of(base)?.0;
         t.extend(dict_to_toml(kwargs)?);
-        let v: CoreVehicle = from_table(t, "VehicleParams")?;
-        blendtrack::config::validate_vehicle(&v).map_err(config_error)?;
+        let v: CoreVehicle = Fields(t).to_core(VEHICLE, blendtrack::config::validate_vehicle)?;
         Ok(Self::from(&v))
     }
 }
@@ -379,6 +419,24 @@ impl VehicleParams {
     #[pyo3(signature = (**kwargs))]
     fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         Self::with_kwargs(&CoreVehicle::default(), kwargs)
+    }
+
+    fn __getattr__<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+        self.fields.get(py, VEHICLE, name)
+    }
+
+    fn __setattr__(&mut self, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+        self.fields.set(VEHICLE, name, value)
+    }
+
+    fn __delattr__(&mut self, name: &str) -> PyResult<()> {
+        Err(PyAttributeError::new_err(format!(
+            "cannot delete attribute '{name}' of '{VEHICLE}'"
+        )))
+    }
+
+    fn __dir__(slf: &Bound<'_, Self>) -> PyResult<Vec<String>> {
+        Fields::dir(slf.as_any(), &slf.borrow().fields)
     }
 
     #[pyo3(signature = (**kwargs))]
@@ -395,8 +453,7 @@ impl VehicleParams {
     #[pyo3(signature = (text, source = "<string>"))]
     fn from_toml(text: &str, source: &str) -> PyResult<Self> {
         let t = parse_section(text, source, "vehicle")?;
-        let v: CoreVehicle = from_table(t, source)?;
-        blendtrack::config::validate_vehicle(&v).map_err(config_error)?;
+        let v: CoreVehicle = Fields(t).to_core(source, blendtrack::config::validate_vehicle)?;
         Ok(Self::from(&v))
     }
 
@@ -423,10 +480,7 @@ impl VehicleParams {
     }
 
     fn __repr__(&self) -> String {
-        format!(
-            "VehicleParams(wheelbase_m={}, max_steering_deg={}, max_steering_rate_deg_s={}, max_acceleration_mps2={}, max_braking_mps2={}, max_speed_mps={})",
-            self.wheelbase_m, self.max_steering_deg, self.max_steering_rate_deg_s, self.max_acceleration_mps2, self.max_braking_mps2, self.max_speed_mps
-        )
+        self.fields.repr::<CoreVehicle>(VEHICLE, None)
     }
 }
 

@@ -13,9 +13,10 @@
 //!
 //! Modules: `errors` (exception classes and core-error mapping), `path`
 //! (`Path`), `config` (`ControllerConfig`, `VehicleParams`, `load_config`),
-//! `sim` (`simulate`, `compute_metrics`), `fleet` (`Fleet`), `geometry`
-//! (polyline functions: arc length, resampling, smoothing, blends, joined
-//! tracks, segment distances).
+//! `sim` (`simulate`, `compute_metrics`), `fleet` (`Fleet`), `traffic`
+//! (`RouteFleet`, on the `blendtrack-traffic` crate), `geometry` (polyline
+//! functions: arc length, resampling, smoothing, blends, joined tracks,
+//! segment distances).
 
 // `!(x >= y)` is a NaN guard on purpose (see the core crate).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]

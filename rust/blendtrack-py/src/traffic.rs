@@ -1,6 +1,6 @@
-//! `RouteFleet` for Python: the core's route-driving batch stepper
-//! (`blendtrack::traffic`), which the SUMO plugin calls twice per simulation
-//! step (`plan`, then `step`) for all controlled vehicles at once.
+//! `RouteFleet` for Python: the route-driving batch stepper of the
+//! `blendtrack-traffic` crate, which the SUMO plugin calls twice per
+//! simulation step (`plan`, then `step`) for all controlled vehicles at once.
 //!
 //! Lanes, edges, junction lanes and traffic lights are integers the caller
 //! interns; traffic-light states are SUMO state strings (`"rrGGy..."`).
@@ -10,17 +10,16 @@
 use crate::config::{ControllerConfig, VehicleParams};
 use crate::errors::{config_error, fleet_error, input_error};
 use crate::path::Path;
-use blendtrack::traffic::{
-    Body, LaneChangeDue, Move, Observations, Piece, Route, RouteFleet as CoreRouteFleet, Signal,
-    SoftLeaders, StopLine, TrafficError, TrafficSettings,
+use blendtrack::{StatValue, VehicleState};
+use blendtrack_traffic::{
+    Body, DriveStats, LaneChangeDue, Move, Observations, Piece, Route,
+    RouteFleet as CoreRouteFleet, Signal, SoftLeaders, StopLine, TrafficError, TrafficSettings,
 };
-use blendtrack::VehicleState;
 use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString, PyTuple};
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
+use rustc_hash::FxHashMap;
 
 type F64In<'py> = PyArrayLike1<'py, f64, AllowTypeChange>;
 type I64In<'py> = PyArrayLike1<'py, i64, AllowTypeChange>;
@@ -50,28 +49,16 @@ fn u32_of(name: &str, i: usize, x: i64) -> PyResult<u32> {
     u32::try_from(x).map_err(|_| input_error(format!("{name}[{i}] = {x}: must be in [0, 2^32)")))
 }
 
-fn stats_dict<'py>(
-    py: Python<'py>,
-    s: &blendtrack::traffic::DriveStats,
-) -> PyResult<Bound<'py, PyDict>> {
+/// A vehicle's statistics as a dict, every entry the traffic crate names
+/// (raw sums and maxima, finished means and RMS, counts), built generically.
+fn stats_dict<'py>(py: Python<'py>, s: &DriveStats) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    d.set_item("steps", s.steps)?;
-    d.set_item("sum_abs_e", s.sum_abs_e)?;
-    d.set_item("sum_e2", s.sum_e2)?;
-    d.set_item("max_abs_e", s.max_abs_e)?;
-    d.set_item("sum_abs_e_rear", s.sum_abs_e_rear)?;
-    d.set_item("sum_abs_e_front", s.sum_abs_e_front)?;
-    d.set_item("sum_eth2", s.sum_eth2)?;
-    d.set_item("sum_v", s.sum_v)?;
-    d.set_item("distance_m", s.distance_m)?;
-    d.set_item("max_lat_acc", s.max_lat_acc)?;
-    d.set_item("time_above_comfort_s", s.time_above_comfort_s)?;
-    d.set_item("sum_jerk2", s.sum_jerk2)?;
-    d.set_item("jerk_n", s.jerk_n)?;
-    d.set_item("last_acc", s.last_acc)?;
-    d.set_item("speed_warnings", s.speed_warnings)?;
-    d.set_item("reverse_warnings", s.reverse_warnings)?;
-    d.set_item("red_light_violations", s.red_light_violations)?;
+    for (key, value) in s.entries() {
+        match value {
+            StatValue::Count(n) => d.set_item(key, n)?,
+            StatValue::Value(x) => d.set_item(key, x)?,
+        }
+    }
     Ok(d)
 }
 
@@ -87,8 +74,10 @@ fn stats_dict<'py>(
 pub struct RouteFleet {
     inner: CoreRouteFleet,
     /// The simulator's vehicle ids of the slots that were given one, both
-    /// ways (`plan_sumo` reads leaders by id).
-    slot_of: HashMap<String, i64, BuildHasherDefault<Fnv>>,
+    /// ways (`plan_sumo` reads leaders by id). SUMO's vehicle ids are short
+    /// strings hashed a few thousand times a step: FxHash (rustc-hash), not
+    /// the DoS-resistant, slower SipHash.
+    slot_of: FxHashMap<String, i64>,
     name_of: Vec<Option<String>>,
     /// What `leaders_on_lanes` found for the slots it was given, kept for
     /// the next `plan_sumo` with the same slots: (slots, leader per slot).
@@ -97,28 +86,6 @@ pub struct RouteFleet {
 
 /// A leader read off a lane list: (its slot, the gap in m), or None.
 type ListedLeader = Option<(i64, f64)>;
-
-/// FNV-1a: SUMO's vehicle ids are short strings hashed a few thousand times
-/// a step; the default SipHash (DoS-resistant, slower) is not needed here.
-#[derive(Default)]
-struct Fnv(u64);
-
-impl Hasher for Fnv {
-    fn write(&mut self, bytes: &[u8]) {
-        let mut h = if self.0 == 0 {
-            0xcbf2_9ce4_8422_2325
-        } else {
-            self.0
-        };
-        for &b in bytes {
-            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
-        }
-        self.0 = h;
-    }
-    fn finish(&self) -> u64 {
-        self.0
-    }
-}
 
 #[pymethods]
 impl RouteFleet {
@@ -165,7 +132,7 @@ impl RouteFleet {
         })?;
         Ok(RouteFleet {
             inner,
-            slot_of: HashMap::default(),
+            slot_of: FxHashMap::default(),
             name_of: Vec::new(),
             listed: None,
         })

@@ -141,7 +141,7 @@ impl Controller {
     }
 
     /// One step under a speed limit: the free-flow law aims at
-    /// `min(preferred_speed, speed_limit_mps)` (SUMO lanes carry their limit).
+    /// `min(preferred_speed, speed_limit_mps)` (road lanes carry their limit).
     pub fn step_limited(
         &mut self,
         measured: &VehicleState,

@@ -1,7 +1,7 @@
-//! Batch control of many vehicles in one call per step (the SUMO plugin's unit).
+//! Batch control of many vehicles in one call per step (a traffic bridge's unit).
 //!
 //! A [`Fleet`] keeps a registry of tracks (a path plus its virtual corridor,
-//! e.g. one per SUMO route) and of vehicles, each in a numbered slot with its
+//! e.g. one per road route) and of vehicles, each in a numbered slot with its
 //! own [`Controller`] (projection hints), configuration and vehicle limits.
 //! Vehicles come and go: [`Fleet::add_vehicle`] returns a slot number,
 //! [`Fleet::remove_vehicle`] frees it, and a freed number is handed out again
@@ -36,6 +36,7 @@ use crate::error::ConfigError;
 use crate::longitudinal::Obstacle;
 use crate::path::Path;
 use crate::vehicle::{Command, Vehicle, VehicleParams, VehicleState};
+use rayon::prelude::*;
 use std::sync::Arc;
 use thiserror::Error;
 
@@ -186,8 +187,10 @@ pub struct Fleet {
     /// Per-slot "seen in this step" marks, kept to avoid a per-step allocation.
     seen: Vec<u32>,
     epoch: u32,
-    /// Threads a large step is split over (0: one per core, up to `MAX_THREADS`).
+    /// Threads a large step is split over (0: rayon's global pool, one per core).
     threads: usize,
+    /// The pool of `threads` threads when more than one is asked for.
+    pool: Option<Arc<rayon::ThreadPool>>,
 }
 
 impl Fleet {
@@ -196,9 +199,21 @@ impl Fleet {
     }
 
     /// Threads a step of at least `PARALLEL_MIN_VEHICLES` vehicles is split
-    /// over: 0 (the default) for one per core, 1 to stay on the calling thread.
+    /// over: 0 (the default) for one per core (rayon's global pool), 1 to
+    /// stay on the calling thread, more for a pool of that many (at most
+    /// `MAX_THREADS`; a pool the system cannot start falls back to the
+    /// global one).
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads;
+        self.pool = (threads > 1)
+            .then(|| {
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads.min(MAX_THREADS))
+                    .build()
+                    .ok()
+            })
+            .flatten()
+            .map(Arc::new);
     }
     pub fn threads(&self) -> usize {
         self.threads
@@ -428,7 +443,7 @@ impl Fleet {
     }
 
     /// Steps the listed vehicles once (see the module docs). Large batches
-    /// are split over the available cores (scoped threads); each vehicle's
+    /// are split over the available cores (rayon); each vehicle's
     /// result does not depend on the split.
     pub fn step(&mut self, inp: &FleetInputs<'_>) -> Result<FleetOutputs, FleetError> {
         self.check(inp)?;
@@ -446,34 +461,24 @@ impl Fleet {
             })
             .collect();
         let mut rows = vec![Row::default(); n];
-        let threads = if n < PARALLEL_MIN_VEHICLES {
-            1
-        } else if self.threads > 0 {
-            self.threads.min(MAX_THREADS)
-        } else {
-            std::thread::available_parallelism()
-                .map_or(1, |p| p.get())
-                .min(MAX_THREADS)
-        };
-        if threads <= 1 {
+        if n < PARALLEL_MIN_VEHICLES || self.threads == 1 {
             for (i, (e, row)) in entries.iter_mut().zip(rows.iter_mut()).enumerate() {
                 *row = step_one(e, inp, i);
             }
         } else {
-            let chunk = n.div_ceil(threads);
-            std::thread::scope(|scope| {
-                for (c, (es, rs)) in entries
-                    .chunks_mut(chunk)
-                    .zip(rows.chunks_mut(chunk))
+            // Each vehicle's row depends on its own entry and the shared
+            // inputs only, so any split over threads gives the same rows.
+            let mut work = || {
+                entries
+                    .par_iter_mut()
+                    .zip(rows.par_iter_mut())
                     .enumerate()
-                {
-                    scope.spawn(move || {
-                        for (j, (e, row)) in es.iter_mut().zip(rs.iter_mut()).enumerate() {
-                            *row = step_one(e, inp, c * chunk + j);
-                        }
-                    });
-                }
-            });
+                    .for_each(|(i, (e, row))| *row = step_one(e, inp, i));
+            };
+            match &self.pool {
+                Some(pool) => pool.install(work),
+                None => work(),
+            }
         }
         let col = |f: fn(&Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
         Ok(FleetOutputs {
@@ -966,6 +971,19 @@ mod tests {
                 par.next.as_ref().unwrap().theta_rad[i],
                 one.next.as_ref().unwrap().theta_rad[0]
             );
+        }
+        // A pool of 3 threads and the calling thread alone give the same batch.
+        for threads in [3, 1] {
+            let (mut g, g_slots) = fleet_with(n);
+            g.set_threads(threads);
+            let out = g
+                .step(&FleetInputs {
+                    dt_s: Some(0.1),
+                    ..FleetInputs::new(&g_slots, &x, &y, &th, &v, &d)
+                })
+                .unwrap();
+            // (Debug text: NaN entries compare equal there, and every bit counts.)
+            assert_eq!(format!("{out:?}"), format!("{par:?}"), "threads {threads}");
         }
         // Empty step is fine.
         let out = f

@@ -8,10 +8,11 @@
 //! on virtual borders and a ray cast ([`longitudinal`]), the reference
 //! [`path`] they track, a kinematic bicycle [`vehicle`] with actuator limits,
 //! delay and sensor noise, a closed-loop [`sim`]ulator with its [`metrics`],
-//! a batch [`fleet`] stepping many vehicles in one call, and [`traffic`]:
-//! that fleet driving road routes (lanes, stop lines, signals) among other
-//! traffic. It knows nothing of Python or SUMO: the binding crate and the
-//! Python package build on it.
+//! one accumulator of a drive's statistics ([`stats`]), and a batch
+//! [`fleet`] stepping many vehicles in one call. It knows nothing of Python
+//! or of any traffic simulator: the `blendtrack-traffic` crate (road routes
+//! among other traffic), the binding crate and the Python package build on
+//! it.
 //!
 //! Conventions (SPEC §1): SI units, world frame x east / y north, heading CCW
 //! from +x in (-pi, pi], steering > 0 turns left, lateral error > 0 on the
@@ -32,7 +33,7 @@ pub mod metrics;
 pub mod path;
 pub mod polyline;
 pub mod sim;
-pub mod traffic;
+pub mod stats;
 pub mod vehicle;
 
 pub use config::{Config, ControllerConfig, Experiment, ExperimentSet, LateralKind};
@@ -44,8 +45,5 @@ pub use longitudinal::{Corridor, Obstacle};
 pub use metrics::{run_metrics, trace_metrics, RunMetrics, Series, WindowMetrics};
 pub use path::{wrap_angle, Path, Projection, Widths};
 pub use sim::{simulate, SimOptions, Trace};
-pub use traffic::{
-    Body, DriveStats, Move, Observations, Piece, Route, RouteFleet, RouteOutputs, Signal, StopLine,
-    TrafficError, TrafficSettings,
-};
+pub use stats::{StatValue, TrackingSample, TrackingStats};
 pub use vehicle::{Command, Direction, NoiseModel, Sensor, Vehicle, VehicleParams, VehicleState};

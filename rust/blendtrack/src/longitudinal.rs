@@ -23,7 +23,8 @@
 //!   border ahead in a curve is a comfort limit, not a wall, so it never
 //!   triggers the emergency braking at b_l that the law falls back to when
 //!   `U < 0`. Followers that expect a leader to brake at most at its normal
-//!   deceleration (SUMO's car-following models) stay collision-free behind it.
+//!   deceleration (traffic simulators' car-following models) stay
+//!   collision-free behind it.
 //!   A soft obstacle ([`Obstacle::soft`]) is bounded the same way.
 //!
 //! Note that the law is not monotone in the gap: just above the boundary of
@@ -179,7 +180,7 @@ pub fn longitudinal_accel(
 /// Each border is kept twice: at full resolution (one vertex per path
 /// vertex, [`Corridor::left`], [`Corridor::right`]) and simplified for the
 /// ray cast (Douglas-Peucker, 1 cm tolerance), so that a straight stretch of
-/// a densely sampled SUMO lane costs one segment test instead of hundreds.
+/// a densely sampled road lane costs one segment test instead of hundreds.
 #[derive(Debug, Clone)]
 pub struct Corridor {
     left: Vec<Point2<f64>>,

@@ -6,6 +6,7 @@
 //! error of the control point, `e_theta` its heading error, `delta` the
 //! applied steering angle and `v` the signed speed, one sample per step:
 //!
+//! - The sums and maxima are a [`TrackingStats`] over the window.
 //! - `lateral_error_mean_abs_m` = mean |e|, `lateral_error_rms_m` =
 //!   sqrt(mean e^2), `lateral_error_max_abs_m` = max |e|.
 //! - `heading_error_rms_deg` = sqrt(mean e_theta^2), in degrees.
@@ -47,6 +48,7 @@
 //!   distance after initialization" is `settled.lateral_error_mean_abs_m`.
 
 use crate::sim::Trace;
+use crate::stats::{TrackingSample, TrackingStats};
 
 /// |e| below this (m), for good, means settled.
 pub const SETTLING_THRESHOLD_M: f64 = 0.1;
@@ -145,18 +147,16 @@ pub fn window_metrics(
     if n == 0 {
         return WindowMetrics::default();
     }
-    let (mut sum_abs, mut sum_sq, mut max_abs, mut sum_h2, mut sum_speed, mut max_lat) =
-        (0.0, 0.0, 0.0f64, 0.0, 0.0, 0.0f64);
+    let mut acc = TrackingStats::default();
     let (mut sum_rate2, mut max_rate, mut n_rate) = (0.0, 0.0f64, 0usize);
     for i in range.clone() {
-        let e = s.lateral_error_m[i];
-        sum_abs += e.abs();
-        sum_sq += e * e;
-        max_abs = max_abs.max(e.abs());
-        sum_h2 += s.heading_error_rad[i] * s.heading_error_rad[i];
         let v = s.v_mps[i];
-        sum_speed += v.abs();
-        max_lat = max_lat.max((v * v * s.delta_rad[i].tan() / wheelbase_m).abs());
+        acc.add(&TrackingSample {
+            lateral_error_m: s.lateral_error_m[i],
+            heading_error_rad: s.heading_error_rad[i],
+            v_mps: v,
+            lateral_accel_mps2: v * v * s.delta_rad[i].tan() / wheelbase_m,
+        });
         if i > range.start {
             let dt = s.t_s[i] - s.t_s[i - 1];
             if dt > 0.0 {
@@ -173,14 +173,14 @@ pub fn window_metrics(
         s.distance_m[range.start - 1]
     };
     WindowMetrics {
-        lateral_error_mean_abs_m: sum_abs / n as f64,
-        lateral_error_rms_m: rms(sum_sq, n),
-        lateral_error_max_abs_m: max_abs,
-        heading_error_rms_deg: rms(sum_h2, n).to_degrees(),
+        lateral_error_mean_abs_m: acc.lateral_error_mean_abs_m(),
+        lateral_error_rms_m: acc.lateral_error_rms_m(),
+        lateral_error_max_abs_m: acc.max_abs_e,
+        heading_error_rms_deg: acc.heading_error_rms_deg(),
         steering_rate_rms_deg_s: rms(sum_rate2, n_rate).to_degrees(),
         steering_rate_max_deg_s: max_rate.to_degrees(),
-        lateral_accel_max_mps2: max_lat,
-        mean_speed_mps: sum_speed / n as f64,
+        lateral_accel_max_mps2: acc.max_lat_acc,
+        mean_speed_mps: acc.mean_speed_mps(),
         distance_m: s.distance_m[range.end - 1] - before,
         samples: n,
     }

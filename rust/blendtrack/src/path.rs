@@ -1060,7 +1060,7 @@ mod tests {
 
     #[test]
     fn arc_length_lookup_is_exact_on_unevenly_sampled_paths() {
-        // Segment lengths from 0.01 m to 40 m, as SUMO lane shapes have.
+        // Segment lengths from 0.01 m to 40 m, as road-network lane shapes have.
         let mut pts = vec![[0.0, 0.0]];
         let mut x = 0.0;
         for i in 0..300 {
@@ -1091,7 +1091,7 @@ mod tests {
 
     #[test]
     fn a_segment_guess_never_changes_a_look_up() {
-        // Unevenly sampled (as SUMO lane shapes are), open and closed.
+        // Unevenly sampled (as road-network lane shapes are), open and closed.
         let mut pts = vec![[0.0, 0.0]];
         let mut x = 0.0f64;
         for i in 0..200 {

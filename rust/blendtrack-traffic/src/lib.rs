@@ -1,0 +1,650 @@
+//! Driving road routes inside a traffic simulator, many vehicles per call.
+//!
+//! [`RouteFleet`] wraps a [`Fleet`] with what a vehicle needs to drive a road
+//! route among other traffic, so that a simulator bridge (the SUMO plugin)
+//! is left with reading the simulator and writing poses back:
+//!
+//! - a [`Route`] per track: the lane pieces along the track (where each lane
+//!   starts in arc length, its speed limit, how arc length maps to the
+//!   simulator's lane position, how far the track strays from that lane's
+//!   centreline) and the stop lines of the junctions ahead, each
+//!   with its traffic light link or its right of way by the road network;
+//! - per vehicle: its state (blendtrack's state is authoritative: the bridge
+//!   never passes it back in), the arc length of its front bumper, the next
+//!   stop line, a yellow-light decision that holds until the light changes,
+//!   and the statistics a report needs (lateral error, jerk, lateral
+//!   acceleration against a comfort limit, warnings, red-light crossings).
+//!
+//! One simulation step is two calls:
+//! 1. [`RouteFleet::plan`] takes the leaders the simulator reports (gap, and
+//!    either the leader's slot when blendtrack drives it or its speed) and
+//!    decides each vehicle's stop line: red stops; yellow stops when the
+//!    stopping law manages it at the planning deceleration; a link without
+//!    priority needs the simulator's word on approaching foes, so `plan`
+//!    returns the vehicles to ask about; any link waits when the vehicle's
+//!    leader leaves no room behind it beyond the junction (keep the junction
+//!    clear); the end of the route is a standing obstacle only with
+//!    `stop_at_route_end` (SUMO's drivers leave at speed).
+//! 2. [`RouteFleet::step`] takes the answers, runs the controllers and the
+//!    bicycle model for everyone, and returns for each vehicle how to put the
+//!    new pose into the simulator, cheapest first: [`Move::Hold`] (nothing to
+//!    send), [`Move::Speed`] (only a speed: the simulator's own movement
+//!    carries the vehicle to its new place), [`Move::Lane`] (lane and lane
+//!    position, then the speed), [`Move::Xy`] (front-bumper point and
+//!    heading, then the speed), or [`Move::Invalid`] (unusable state: hand
+//!    the vehicle back).
+//!
+//! Lane positions. A vehicle is given to the simulator by lane while its
+//! control point is within `lane_move_lateral_m` (minus the track's own
+//! offset from the lane's centreline, [`Piece::offset_m`]) and
+//! `lane_move_heading_rad` of the track, and by (x, y) otherwise (lane
+//! changes, junction lanes the track does not follow, larger errors).
+//! By lane, blendtrack knows where the simulator has the front after its
+//! movement (`known`): a simulator that moves a vehicle `speed x dt` along
+//! its lanes in a step (SUMO with speed mode 0, Euler update) then needs no
+//! position at all, only the speed that makes up the distance from there to
+//! the front's new lane position (within `GLIDE_TOLERANCE_*` of the
+//! vehicle's own, which keeps the simulator's reported speed honest); one
+//! that would need more is placed with [`Move::Lane`] at the new position
+//! minus `v dt` (before the simulator's movement), never behind where the
+//! simulator already has it, so a follower never sees its leader jump
+//! backwards. After a move over a lane end, an (x, y) move or a placement
+//! onto another lane, the position is unknown until the bridge reports it
+//! ([`RouteOutputs::read_position`]); every `verify_every` steps it reports
+//! it anyway, so a prediction that went wrong is corrected.
+//!
+//! Lanes, edges, junction lanes and traffic lights are small integers of the
+//! caller's choosing (the bridge interns the simulator's string ids).
+//! Signal states are [`Signal`]s, one per link of a light.
+
+// Checks are written `!(x > 0.0)` on purpose: a NaN fails every comparison,
+// so it takes the "bad input" branch; `x <= 0.0` would let it through.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
+mod error;
+mod placement;
+mod plan;
+mod route;
+mod signal;
+mod stats;
+mod step;
+#[cfg(test)]
+mod testkit;
+
+pub use error::TrafficError;
+pub use placement::Move;
+pub use plan::{can_stop, Observations, SoftLeaders};
+pub use route::{LaneChangeDue, Piece, Route, StopLine};
+pub use signal::Signal;
+pub use stats::DriveStats;
+pub use step::RouteOutputs;
+
+use blendtrack::{ControllerConfig, Fleet, Path, VehicleParams, VehicleState};
+use error::check_len;
+use nalgebra::Point2;
+use plan::Plan;
+use signal::MAX_LIGHTS;
+use std::sync::Arc;
+
+/// Dimensions of a driven vehicle.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Body {
+    /// Rear axle to front bumper (m).
+    pub reach_m: f64,
+    pub length_m: f64,
+    /// The simulator's standstill gap (m).
+    pub min_gap_m: f64,
+}
+
+/// Thresholds of the bridge; the defaults are the SUMO plugin's.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrafficSettings {
+    /// Extra distance kept to leaders and stop lines at standstill (m).
+    pub standstill_margin_m: f64,
+    /// How far before a link without priority foes are asked about (m).
+    pub yield_lookahead_m: f64,
+    /// Room kept before a lane's end when a lane change is due (m).
+    pub lane_change_room_m: f64,
+    /// Whether the end of the route is a standing obstacle. SUMO's drivers
+    /// leave the network at their route's end without slowing down (its
+    /// default `arrivalSpeed="current"`), so by default blendtrack's do too;
+    /// with this set a vehicle stops at its route's end, like the end of a
+    /// race track's path in the paper.
+    pub stop_at_route_end: bool,
+    /// With `stop_at_route_end`, the end of the route is an obstacle this far
+    /// past the track's end (m)...
+    pub route_end_extra_m: f64,
+    /// ... once it is closer than this (m).
+    pub route_end_horizon_m: f64,
+    /// Below these errors of the control point a vehicle moves as (lane, position).
+    pub lane_move_lateral_m: f64,
+    pub lane_move_heading_rad: f64,
+    /// Lateral acceleration above which time is counted as uncomfortable (m/s^2).
+    pub comfort_lateral_accel_mps2: f64,
+    /// Every this many steps of a vehicle, one (|curvature|, |v|, |e|, |a_lat|) sample is kept.
+    pub sample_every: u64,
+    /// Every this many steps of a vehicle the bridge reads where the
+    /// simulator has it, to check the prediction (0: only where unknown).
+    pub verify_every: u64,
+}
+
+impl Default for TrafficSettings {
+    fn default() -> Self {
+        TrafficSettings {
+            standstill_margin_m: 1.0,
+            yield_lookahead_m: 30.0,
+            lane_change_room_m: 15.0,
+            stop_at_route_end: false,
+            route_end_extra_m: 5.0,
+            route_end_horizon_m: 200.0,
+            lane_move_lateral_m: 0.15,
+            lane_move_heading_rad: 2.0_f64.to_radians(),
+            comfort_lateral_accel_mps2: 2.0,
+            sample_every: 10,
+            verify_every: 10,
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+struct Driven {
+    route: Arc<Route>,
+    body: Body,
+    state: VehicleState,
+    s_front_m: f64,
+    /// The segment of the path holding `s_front_m` (a look-up guess).
+    seg_front: usize,
+    next_stop: usize,
+    /// (stop index, stop?) decided when the light ahead turned yellow.
+    yellow: Option<(usize, bool)>,
+    /// The stop line the vehicle waits at to give way or keep the junction
+    /// clear. Once decided it holds while the reason lasts, even where the
+    /// stopping law brakes harder than the planning deceleration (it does,
+    /// just before the line): re-deciding "can it still stop?" every step
+    /// would let the vehicle roll into the junction at the last moment.
+    holding: Option<usize>,
+    /// Where the simulator has the front after its movement over the last
+    /// step, (lane, position): predicted from the last move, or read back by
+    /// the bridge; None when unknown.
+    known: Option<(u32, f64)>,
+    /// The speed last sent to the simulator (NaN before the first).
+    sumo_speed: f64,
+    stats: DriveStats,
+}
+
+/// A [`Fleet`] driving road routes (see the module docs).
+#[derive(Debug, Clone, Default)]
+pub struct RouteFleet {
+    fleet: Fleet,
+    settings: TrafficSettings,
+    routes: Vec<Option<Arc<Route>>>,
+    driven: Vec<Option<Driven>>,
+    signals: Vec<Vec<Signal>>,
+    plan: Option<Plan>,
+    samples: Vec<[f64; 4]>,
+}
+
+impl RouteFleet {
+    pub fn new(settings: TrafficSettings) -> Result<Self, TrafficError> {
+        let checks: [(&'static str, f64, bool); 8] = [
+            ("standstill_margin_m", settings.standstill_margin_m, false),
+            ("yield_lookahead_m", settings.yield_lookahead_m, false),
+            ("lane_change_room_m", settings.lane_change_room_m, false),
+            ("route_end_extra_m", settings.route_end_extra_m, false),
+            ("route_end_horizon_m", settings.route_end_horizon_m, false),
+            ("lane_move_lateral_m", settings.lane_move_lateral_m, false),
+            (
+                "lane_move_heading_rad",
+                settings.lane_move_heading_rad,
+                false,
+            ),
+            (
+                "comfort_lateral_accel_mps2",
+                settings.comfort_lateral_accel_mps2,
+                true,
+            ),
+        ];
+        for (name, value, strict) in checks {
+            if !(value.is_finite() && if strict { value > 0.0 } else { value >= 0.0 }) {
+                return Err(TrafficError::Parameter {
+                    name,
+                    value,
+                    message: if strict {
+                        "must be finite and > 0"
+                    } else {
+                        "must be finite and >= 0"
+                    },
+                });
+            }
+        }
+        Ok(RouteFleet {
+            settings: TrafficSettings {
+                sample_every: settings.sample_every.max(1),
+                ..settings
+            },
+            ..Default::default()
+        })
+    }
+
+    pub fn settings(&self) -> &TrafficSettings {
+        &self.settings
+    }
+    pub fn fleet(&self) -> &Fleet {
+        &self.fleet
+    }
+    /// See [`Fleet::set_threads`].
+    pub fn set_threads(&mut self, threads: usize) {
+        self.fleet.set_threads(threads);
+    }
+    pub fn len(&self) -> usize {
+        self.fleet.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.fleet.is_empty()
+    }
+
+    /// Registers a track with its route; returns the track id.
+    pub fn add_route(
+        &mut self,
+        path: Path,
+        config: ControllerConfig,
+        route: Route,
+    ) -> Result<usize, TrafficError> {
+        let id = self.fleet.add_track(path, config)?;
+        if self.routes.len() <= id {
+            self.routes.resize(id + 1, None);
+        }
+        self.routes[id] = Some(Arc::new(route));
+        Ok(id)
+    }
+
+    /// Removes a track (and its route) that no vehicle drives any more,
+    /// e.g. one built for a single vehicle's lane change once it has moved
+    /// on; see [`Fleet::remove_track`].
+    pub fn remove_route(&mut self, track_id: i64) -> Result<(), TrafficError> {
+        self.fleet.remove_track(track_id)?;
+        self.routes[track_id as usize] = None;
+        Ok(())
+    }
+
+    fn route_of_track(&self, track_id: i64) -> Result<Arc<Route>, TrafficError> {
+        self.fleet.track(track_id)?;
+        Ok(self.routes[track_id as usize]
+            .clone()
+            .expect("every track is added with a route"))
+    }
+
+    fn front_arc(
+        &self,
+        track_id: i64,
+        state: &VehicleState,
+        reach_m: f64,
+    ) -> Result<f64, TrafficError> {
+        let path = &self.fleet.track(track_id)?.path;
+        let front = Point2::new(
+            state.x_m + reach_m * state.theta_rad.cos(),
+            state.y_m + reach_m * state.theta_rad.sin(),
+        );
+        Ok(path.project(&front).s)
+    }
+
+    /// Adds a vehicle at `state` (its rear axle) on a track; returns its slot.
+    pub fn add_vehicle(
+        &mut self,
+        track_id: i64,
+        config: Option<ControllerConfig>,
+        params: Option<VehicleParams>,
+        body: Body,
+        state: VehicleState,
+    ) -> Result<usize, TrafficError> {
+        for (name, value) in [
+            ("x", state.x_m),
+            ("y", state.y_m),
+            ("theta", state.theta_rad),
+            ("v", state.v_mps),
+            ("delta", state.delta_rad),
+            ("reach_m", body.reach_m),
+            ("length_m", body.length_m),
+            ("min_gap_m", body.min_gap_m),
+        ] {
+            if !value.is_finite() {
+                return Err(TrafficError::Parameter {
+                    name,
+                    value,
+                    message: "must be finite",
+                });
+            }
+        }
+        let route = self.route_of_track(track_id)?;
+        let s_front_m = self.front_arc(track_id, &state, body.reach_m)?;
+        let slot = self.fleet.add_vehicle(track_id, config, params)?;
+        if self.driven.len() <= slot {
+            self.driven.resize(slot + 1, None);
+        }
+        self.driven[slot] = Some(Driven {
+            route,
+            body,
+            state,
+            s_front_m,
+            seg_front: usize::MAX,
+            next_stop: 0,
+            yellow: None,
+            holding: None,
+            known: None,
+            sumo_speed: f64::NAN,
+            stats: DriveStats::default(),
+        });
+        Ok(slot)
+    }
+
+    fn driven(&self, slot: i64) -> Result<&Driven, TrafficError> {
+        self.fleet.vehicle_track(slot)?;
+        self.driven[slot as usize]
+            .as_ref()
+            .ok_or(TrafficError::NoRoute { slot })
+    }
+
+    /// Moves a vehicle to another track (a lane change, a new route); its
+    /// state and statistics stay, its stop lines start over.
+    pub fn retrack(&mut self, slot: i64, track_id: i64) -> Result<(), TrafficError> {
+        let route = self.route_of_track(track_id)?;
+        let d = self.driven(slot)?;
+        let s_front_m = self.front_arc(track_id, &d.state, d.body.reach_m)?;
+        self.fleet.set_vehicle_track(slot, track_id)?;
+        let d = self.driven[slot as usize].as_mut().expect("checked above");
+        d.route = route;
+        d.s_front_m = s_front_m;
+        d.seg_front = usize::MAX;
+        d.next_stop = 0;
+        d.yellow = None;
+        d.holding = None;
+        self.plan = None;
+        Ok(())
+    }
+
+    /// Frees a slot; returns the vehicle's statistics.
+    pub fn remove_vehicle(&mut self, slot: i64) -> Result<DriveStats, TrafficError> {
+        let stats = self.driven(slot)?.stats;
+        self.fleet.remove_vehicle(slot)?;
+        self.driven[slot as usize] = None;
+        self.plan = None;
+        Ok(stats)
+    }
+
+    pub fn stats(&self, slot: i64) -> Result<DriveStats, TrafficError> {
+        Ok(self.driven(slot)?.stats)
+    }
+    pub fn state(&self, slot: i64) -> Result<VehicleState, TrafficError> {
+        Ok(self.driven(slot)?.state)
+    }
+    /// Arc length of the vehicle's front bumper on its track (m).
+    pub fn s_front(&self, slot: i64) -> Result<f64, TrafficError> {
+        Ok(self.driven(slot)?.s_front_m)
+    }
+    /// The stop line ahead of the vehicle (the one its plan looked at).
+    pub fn next_stop(&self, slot: i64) -> Result<Option<StopLine>, TrafficError> {
+        let d = self.driven(slot)?;
+        Ok(d.route.stops.get(d.next_stop).copied())
+    }
+    pub fn vehicle_config(&self, slot: i64) -> Result<&ControllerConfig, TrafficError> {
+        Ok(self.fleet.vehicle_config(slot)?)
+    }
+    pub fn vehicle_params(&self, slot: i64) -> Result<&VehicleParams, TrafficError> {
+        Ok(self.fleet.vehicle_params(slot)?)
+    }
+
+    /// Sets the state of every link of a light. Lights are the caller's small
+    /// integers (below 2^20); one never set counts as green with priority.
+    pub fn set_signal(&mut self, light: usize, links: &[Signal]) -> Result<(), TrafficError> {
+        if light >= MAX_LIGHTS {
+            return Err(TrafficError::UnknownLight { light });
+        }
+        if light >= self.signals.len() {
+            self.signals.resize(light + 1, Vec::new());
+        }
+        self.signals[light].clear();
+        self.signals[light].extend_from_slice(links);
+        Ok(())
+    }
+
+    /// The lanes on which at least two of `slots` are, where blendtrack knows
+    /// where the simulator has them (sorted, each once): the lanes whose
+    /// vehicle lists [`RouteFleet::leaders_on_lanes`] can read leaders from.
+    pub fn lanes_with_followers(&self, slots: &[i64]) -> Result<Vec<u32>, TrafficError> {
+        let mut lanes = Vec::with_capacity(slots.len());
+        for &slot in slots {
+            if let Some((lane, _)) = self.driven(slot)?.known {
+                lanes.push(lane);
+            }
+        }
+        lanes.sort_unstable();
+        let mut out = Vec::new();
+        let mut k = 0;
+        while k < lanes.len() {
+            let j = lanes[k..].iter().take_while(|&&l| l == lanes[k]).count();
+            if j >= 2 {
+                out.push(lanes[k]);
+            }
+            k += j;
+        }
+        Ok(out)
+    }
+
+    /// Leaders read off the simulator's lists of the vehicles on lanes (back
+    /// to front; an entry is the slot of a vehicle driven here, or None for
+    /// any other): where a listed slot's lane is one of `lanes` and the
+    /// vehicle in front of it there is one driven here whose place is known,
+    /// its leader is that vehicle and the gap is the simulator's (the
+    /// leader's back minus the front minus minGap), exactly what the
+    /// simulator's own leader query gives for a leader on the same lane.
+    /// Returns, per entry of `slots`, (leader slot, gap) or None where only
+    /// the simulator can tell (first on its lane, a leader not driven here,
+    /// a place not known or not where the list has it).
+    pub fn leaders_on_lanes(
+        &self,
+        slots: &[i64],
+        lanes: &[u32],
+        vehicles: &[Vec<Option<i64>>],
+    ) -> Result<Vec<Option<(i64, f64)>>, TrafficError> {
+        check_len("vehicles", lanes.len(), vehicles.len())?;
+        let mut index = vec![usize::MAX; self.driven.len()];
+        for (i, &slot) in slots.iter().enumerate() {
+            self.driven(slot)?;
+            index[slot as usize] = i;
+        }
+        let known_on = |slot: i64, lane: u32| -> Option<&Driven> {
+            let d = usize::try_from(slot)
+                .ok()
+                .and_then(|s| self.driven.get(s))
+                .and_then(Option::as_ref)?;
+            matches!(d.known, Some((l, _)) if l == lane).then_some(d)
+        };
+        let mut out = vec![None; slots.len()];
+        for (&lane, list) in lanes.iter().zip(vehicles) {
+            for pair in list.windows(2) {
+                let (Some(f), Some(l)) = (pair[0], pair[1]) else {
+                    continue;
+                };
+                let Some(&i) = usize::try_from(f).ok().and_then(|f| index.get(f)) else {
+                    continue;
+                };
+                if i == usize::MAX {
+                    continue;
+                }
+                if let (Some(df), Some(dl)) = (known_on(f, lane), known_on(l, lane)) {
+                    let (pf, pl) = (df.known.expect("matched").1, dl.known.expect("matched").1);
+                    out[i] = Some((l, pl - dl.body.length_m - pf - df.body.min_gap_m));
+                }
+            }
+        }
+        Ok(out)
+    }
+
+    /// Takes the `(|curvature|, |v|, |e|, |lateral acceleration|)` samples kept so far.
+    pub fn take_samples(&mut self) -> Vec<[f64; 4]> {
+        std::mem::take(&mut self.samples)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::testkit::*;
+    use crate::*;
+    use blendtrack::FleetError;
+
+    #[test]
+    fn retrack_keeps_state_and_statistics() {
+        let (mut f, t) = fleet_on(road(None, true));
+        let t2 = f
+            .add_route(
+                road(None, true).0,
+                ControllerConfig::default(),
+                road(None, true).1,
+            )
+            .unwrap() as i64;
+        let a = f
+            .add_vehicle(t, None, None, body(), at(50.0, 10.0))
+            .unwrap() as i64;
+        for _ in 0..5 {
+            step(&mut f, &[a], false);
+        }
+        let before = (
+            f.state(a).unwrap(),
+            f.stats(a).unwrap(),
+            f.s_front(a).unwrap(),
+        );
+        f.retrack(a, t2).unwrap();
+        assert_eq!(f.fleet().vehicle_track(a).unwrap(), t2 as usize);
+        assert_eq!(
+            (f.state(a).unwrap(), f.stats(a).unwrap()),
+            (before.0, before.1)
+        );
+        assert!(
+            (f.s_front(a).unwrap() - before.2).abs() < 1e-6,
+            "{} {}",
+            f.s_front(a).unwrap(),
+            before.2
+        );
+        assert_eq!(
+            f.vehicle_config(a).unwrap().preferred_speed,
+            15.0,
+            "the vehicle's own config stays"
+        );
+    }
+
+    #[test]
+    fn bad_calls_are_errors_and_change_nothing() {
+        let (mut f, t) = fleet_on(road(None, false));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+            .unwrap() as i64;
+        assert_eq!(f.step(&[], DT), Err(TrafficError::NoPlan));
+        assert!(matches!(
+            f.add_vehicle(t, None, None, body(), at(f64::NAN, 1.0)),
+            Err(TrafficError::Parameter { name: "x", .. })
+        ));
+        assert!(matches!(
+            f.add_vehicle(9, None, None, body(), at(0.0, 1.0)),
+            Err(TrafficError::Fleet(FleetError::UnknownTrack { .. }))
+        ));
+        assert_eq!(
+            f.set_signal(1 << 20, &[]),
+            Err(TrafficError::UnknownLight { light: 1 << 20 })
+        );
+        assert!(
+            f.set_signal(3, &[Signal::Stop]).is_ok(),
+            "lights need not be set in order"
+        );
+        let obs = |slots: &'static [i64]| Observations {
+            slots,
+            leader_gap_m: &[f64::NAN, f64::NAN][..slots.len()],
+            leader_slot: &[-1, -1][..slots.len()],
+            leader_speed_mps: &[f64::NAN, f64::NAN][..slots.len()],
+            lane: &[-1, -1][..slots.len()],
+            lane_pos_m: &[f64::NAN, f64::NAN][..slots.len()],
+            soft: None,
+        };
+        assert!(matches!(
+            f.plan(&obs(&[7])),
+            Err(TrafficError::Fleet(FleetError::UnknownSlot { slot: 7 }))
+        ));
+        assert!(matches!(
+            f.plan(&obs(&[0, 0])),
+            Err(TrafficError::Fleet(FleetError::DuplicateSlot { slot: 0 }))
+        ));
+        let short = Observations {
+            leader_gap_m: &[],
+            ..obs(&[0])
+        };
+        assert!(matches!(
+            f.plan(&short),
+            Err(TrafficError::Length {
+                argument: "leader_gap",
+                ..
+            })
+        ));
+        // A plan that asks (a minor link 50 - 3.5 m ahead) needs one answer per question.
+        let a_state = f.state(a).unwrap();
+        for _ in 0..20 {
+            step(&mut f, &[a], false);
+        }
+        let q = f.plan(&obs(&[0])).unwrap();
+        assert_eq!(q, [0]);
+        assert!(matches!(
+            f.step(&[], DT),
+            Err(TrafficError::Length {
+                argument: "must_yield",
+                ..
+            })
+        ));
+        assert!(matches!(
+            f.step(&[true], f64::NAN),
+            Err(TrafficError::Parameter { name: "dt", .. })
+        ));
+        assert!(
+            f.step(&[true], DT).is_ok(),
+            "the plan survives a rejected step"
+        );
+        assert_ne!(f.state(a).unwrap(), a_state);
+        assert!(matches!(
+            RouteFleet::new(TrafficSettings {
+                comfort_lateral_accel_mps2: 0.0,
+                ..Default::default()
+            }),
+            Err(TrafficError::Parameter { .. })
+        ));
+    }
+
+    #[test]
+    fn leaders_come_off_the_lane_lists_where_both_places_are_known() {
+        let (mut f, t) = fleet_on(road(None, true));
+        // Three on lane 10 (30, 60, 90 m rear axles), known to the simulator
+        // after one step; one more not yet known.
+        let s: Vec<i64> = [30.0, 60.0, 90.0]
+            .iter()
+            .map(|&x| f.add_vehicle(t, None, None, body(), at(x, 10.0)).unwrap() as i64)
+            .collect();
+        step(&mut f, &s, false);
+        let late = f
+            .add_vehicle(t, None, None, body(), at(120.0, 10.0))
+            .unwrap() as i64;
+        let all = [s[0], s[1], s[2], late];
+        assert_eq!(f.lanes_with_followers(&all).unwrap(), vec![10]);
+        let pos = |slot: i64| f.driven(slot).unwrap().known.unwrap().1;
+        // The simulator's list of lane 10, back to front: a background
+        // vehicle sits between s[1] and s[2].
+        let list = vec![Some(s[0]), Some(s[1]), None, Some(s[2]), Some(late)];
+        let got = f.leaders_on_lanes(&all, &[10], &[list]).unwrap();
+        let gap = pos(s[1]) - 4.5 - pos(s[0]) - 2.5;
+        assert_eq!(got[0], Some((s[1], gap)));
+        assert_eq!(got[1], None, "a background leader: the simulator tells");
+        assert_eq!(got[2], None, "the leader's place is not known yet");
+        assert_eq!(got[3], None, "first on its lane");
+        // A list of another lane than the one blendtrack knows: nothing read off it.
+        let got = f
+            .leaders_on_lanes(&all, &[11], &[vec![Some(s[0]), Some(s[1])]])
+            .unwrap();
+        assert!(got.iter().all(Option::is_none));
+        assert!(f.leaders_on_lanes(&all, &[10, 11], &[vec![]]).is_err());
+    }
+}

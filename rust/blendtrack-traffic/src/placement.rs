@@ -1,0 +1,466 @@
+//! How a vehicle's new pose goes into the simulator ([`Move`]): by its
+//! speed alone while the simulator's own movement carries it there
+//! ([`glide_distance`]), by lane position, or by (x, y).
+
+use crate::route::Route;
+use crate::{Driven, TrafficSettings};
+
+/// How to put a vehicle's new pose into the simulator.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Move {
+    /// Only set the speed ([`RouteOutputs::sumo_speed_mps`]): the
+    /// simulator's own movement over the step carries the front exactly to
+    /// its new place on the lane (or over a lane end onto the next lane of
+    /// the route); also when the vehicle is about to arrive.
+    Speed = 0,
+    /// (lane, lane position) then the speed.
+    Lane = 1,
+    /// (edge, lane index, front-bumper x, y, angle) then the speed.
+    Xy = 2,
+    /// The state is unusable: hand the vehicle back, do not move it.
+    Invalid = 3,
+    /// Nothing to send: the speed the simulator already has carries the
+    /// front to within `HOLD_SPEED_MPS * dt` of its new place (the rest is
+    /// made up in the next step).
+    Hold = 4,
+}
+
+/// The speed of a speed-only move stays within this (m/s, plus the relative
+/// part below) of the vehicle's own speed in the simulator's lane
+/// coordinates (speed x the piece's scale): what the simulator reports to
+/// other drivers stays honest.
+pub(crate) const GLIDE_TOLERANCE_MPS: f64 = 0.1;
+pub(crate) const GLIDE_TOLERANCE_REL: f64 = 0.02;
+/// A simulator that has the front more than this (m) behind where a
+/// speed-only move can bring it is placed with a [`Move::Lane`].
+pub(crate) const GLIDE_BEHIND_M: f64 = 0.5;
+/// Below this change of the speed (m/s) no speed command is sent ([`Move::Hold`]):
+/// the simulator's speed then differs from the vehicle's by less than this,
+/// its position by less than this times dt (2 mm at 0.1 s), made up in the
+/// next step. 13 % fewer speed commands than at 0.005 m/s on the highway.
+pub(crate) const HOLD_SPEED_MPS: f64 = 0.02;
+/// A speed-only move may carry the front over at most this many lane ends
+/// (short junction lanes at speed).
+pub(crate) const GLIDE_MAX_LANE_ENDS: usize = 3;
+
+/// The distance the simulator must move the front, along its lanes, from
+/// where it has it (`known`: lane, position) to lane position `target` on
+/// piece `k`, and whether that passes a lane end; None when it cannot tell
+/// (unknown position, or a lane the route's pieces do not lead from).
+pub(crate) fn glide_distance(
+    route: &Route,
+    k: usize,
+    target: f64,
+    known: Option<(u32, f64)>,
+) -> Option<(f64, bool)> {
+    let (lane, p) = known?;
+    let pieces = &route.pieces;
+    if pieces[k].lane == lane {
+        return Some((target - p, false));
+    }
+    // Over lane ends: each piece from the known lane on must be a whole lane
+    // that the simulator enters at its start.
+    let mut dist = target;
+    let mut j = k;
+    for _ in 0..GLIDE_MAX_LANE_ENDS {
+        if j == 0 || pieces[j].lane_pos_start_m != 0.0 {
+            return None;
+        }
+        j -= 1;
+        let q = &pieces[j];
+        if q.lane == pieces[j + 1].lane || !q.offset_m.is_finite() {
+            return None;
+        }
+        if q.lane == lane {
+            return Some((dist + q.lane_length_m - p, true));
+        }
+        dist += q.lane_length_m;
+    }
+    None
+}
+
+/// A vehicle's step as the choice of its move sees it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Motion {
+    /// The fleet's outputs and the new state are usable (finite, ok).
+    pub usable: bool,
+    /// Errors of the control point (m, rad), the new speed (m/s).
+    pub lateral_error_m: f64,
+    pub heading_error_rad: f64,
+    pub v_mps: f64,
+    /// Arc length of the front at the new state (m).
+    pub s_front_m: f64,
+    pub dt_s: f64,
+}
+
+/// The chosen move with what goes with it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Placement {
+    pub mv: Move,
+    /// Lane position for [`Move::Lane`] (m, before the simulator's movement).
+    pub pos: f64,
+    /// The speed to give the simulator (m/s).
+    pub sumo_speed: f64,
+    /// Where the simulator will have the front after its movement, when
+    /// blendtrack can tell without asking: (lane, position).
+    pub predicted: Option<(u32, f64)>,
+}
+
+/// How to put vehicle `d`'s new pose (on piece `k` of its route) into the
+/// simulator, cheapest first (see the crate docs).
+pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion) -> Placement {
+    let route = &d.route;
+    let piece = route.pieces[k];
+    let (v, dt_s, sf_new) = (m.v_mps, m.dt_s, m.s_front_m);
+    // Where the front must be on the piece's lane after the
+    // simulator's own movement over the step.
+    let target = piece.lane_pos_start_m + (sf_new - piece.start_m) * piece.scale;
+    let mut p = Placement {
+        mv: Move::Xy,
+        pos: target - v * dt_s,
+        sumo_speed: v,
+        predicted: None,
+    };
+    let on_lane = m.lateral_error_m.abs() + piece.offset_m < st.lane_move_lateral_m
+        && m.heading_error_rad.abs() < st.lane_move_heading_rad
+        && v >= 0.0;
+    // (distance the simulator must move the front, crosses a lane end)
+    let glide = if on_lane {
+        glide_distance(route, k, target, d.known)
+    } else {
+        None
+    };
+    p.mv = if !m.usable {
+        Move::Invalid
+    } else if k == route.pieces.len() - 1
+        && route.lane_change.is_none()
+        && sf_new > route.length_m - 2.0 * v * dt_s - 2.0
+    {
+        // About to arrive: a deferred (x, y) move would be applied
+        // after the simulator removed the vehicle.
+        Move::Speed
+    } else if let Some((dist, cross)) =
+        glide.filter(|&(dist, _)| dist - v * piece.scale * dt_s <= GLIDE_BEHIND_M)
+    {
+        glide_move(d, &mut p, v * piece.scale, dist, cross, dt_s)
+    } else if on_lane && p.pos >= d.body.length_m {
+        if let Some((lane, known)) = d.known {
+            if lane == piece.lane {
+                p.pos = p.pos.max(known);
+            }
+        }
+        p.predicted = Some((piece.lane, p.pos + v * dt_s));
+        Move::Lane
+    } else {
+        Move::Xy
+    };
+    p
+}
+
+/// A speed-only move: the simulator's own movement carries the front
+/// `dist` along its lanes at the speed that makes it up, kept within
+/// GLIDE_TOLERANCE_* of the vehicle's own speed in the simulator's lane
+/// coordinates (`expect`): a simulator a little off (ahead, or behind by up
+/// to GLIDE_BEHIND_M) is brought back over a few steps; it is never moved
+/// backwards. [`Move::Hold`] when the speed it has will do.
+fn glide_move(
+    d: &Driven,
+    p: &mut Placement,
+    expect: f64,
+    dist: f64,
+    cross: bool,
+    dt_s: f64,
+) -> Move {
+    let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect;
+    p.sumo_speed = (dist / dt_s).clamp((expect - tol).max(0.0), expect + tol);
+    // A standstill is always sent: a held creep speed would let
+    // the simulator drift ahead (0.4 mm a step at 4 mm/s), and
+    // it is never moved back.
+    let hold = !cross
+        && (p.sumo_speed - d.sumo_speed).abs() < HOLD_SPEED_MPS
+        && (p.sumo_speed > 0.0 || d.sumo_speed == 0.0);
+    if hold {
+        p.sumo_speed = d.sumo_speed;
+    }
+    if !cross {
+        // Exact; after a lane end the simulator's choice of the
+        // next lane is read back instead.
+        p.predicted = d.known.map(|(lane, at)| (lane, at + p.sumo_speed * dt_s));
+    }
+    if hold {
+        Move::Hold
+    } else {
+        Move::Speed
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::testkit::*;
+    use crate::*;
+
+    #[test]
+    fn moves_follow_the_lane_when_centred_and_xy_otherwise() {
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(50.0, 10.0))
+            .unwrap() as i64;
+        let mut off = at(50.0, 10.0);
+        off.y_m = 2.0;
+        let b = f.add_vehicle(t, None, None, body(), off).unwrap() as i64;
+        let c = f
+            .add_vehicle(t, None, None, body(), at(594.0, 10.0))
+            .unwrap() as i64;
+        let (_, out) = step(&mut f, &[a, b, c], false);
+        assert_eq!(out.moves, [Move::Lane, Move::Xy, Move::Speed]);
+        // Lane position: the new front minus v dt (placed before the simulator moves it).
+        let sf = f.s_front(a).unwrap();
+        assert!((out.lane_pos_m[0] - (sf - out.v_mps[0] * DT)).abs() < 1e-9);
+        assert_eq!((out.lane[0], out.edge[1]), (10, 1));
+        assert!(
+            (out.y_front_m[1]
+                - f.state(b).unwrap().y_m
+                - 3.5 * f.state(b).unwrap().theta_rad.sin())
+            .abs()
+                < 1e-9
+        );
+        assert_eq!(out.read_position, [false, true, true]);
+        // On the junction lane (not plain) even a centred vehicle moves by (x, y).
+        let d = f
+            .add_vehicle(t, None, None, body(), at(200.0, 10.0))
+            .unwrap() as i64;
+        assert_eq!(step(&mut f, &[d], false).1.moves, [Move::Xy]);
+        // The scale maps arc length to lane position on lane 12.
+        let e = f
+            .add_vehicle(t, None, None, body(), at(300.0, 10.0))
+            .unwrap() as i64;
+        let out = step(&mut f, &[e], false).1;
+        let sf = f.s_front(e).unwrap();
+        assert!((out.lane_pos_m[0] - ((sf - 210.0) * 1.01 - out.v_mps[0] * DT)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_placement_never_goes_back_behind_where_the_simulator_has_the_vehicle() {
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(50.0, 10.0))
+            .unwrap() as i64;
+        let sf = f.s_front(a).unwrap();
+        let slots = [a];
+        let plan = |f: &mut RouteFleet, pos: f64| {
+            f.plan(&Observations {
+                slots: &slots,
+                leader_gap_m: &[f64::NAN],
+                leader_slot: &[-1],
+                leader_speed_mps: &[f64::NAN],
+                lane: &[10],
+                lane_pos_m: &[pos],
+                soft: None,
+            })
+            .unwrap();
+        };
+        // The simulator reports the front 0.5 m further on lane 10: it is
+        // slowed down (a speed move), not put back.
+        plan(&mut f, sf + 0.5);
+        let out = f.step(&[], DT).unwrap();
+        assert_eq!(out.moves, [Move::Speed]);
+        assert!(out.sumo_speed_mps[0] < out.v_mps[0] && out.sumo_speed_mps[0] >= 0.0);
+        // Reported 20 m further (a lost vehicle): it waits there, never backwards.
+        plan(&mut f, sf + 20.0);
+        let out = f.step(&[], DT).unwrap();
+        assert!(matches!(out.moves[0], Move::Speed | Move::Hold));
+        assert!(out.sumo_speed_mps[0] >= 0.0);
+        // Reported 2 m behind: placed where it must be.
+        let sf = f.s_front(a).unwrap();
+        plan(&mut f, sf - 2.0);
+        let out = f.step(&[], DT).unwrap();
+        assert_eq!(out.moves, [Move::Lane]);
+        assert!((out.lane_pos_m[0] + out.v_mps[0] * DT - f.s_front(a).unwrap()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn on_its_lane_a_vehicle_is_moved_by_its_speed_alone() {
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(20.0, 14.5))
+            .unwrap() as i64;
+        let mut sim = Sim::on_lane_10();
+        let mut read = true;
+        let mut counts = [0usize; 5];
+        for k in 0..500 {
+            if f.s_front(a).unwrap() > 190.0 {
+                break; // the junction lane is not plain: (x, y) moves there
+            }
+            let out = sim_step(&mut f, a, &mut sim, read);
+            read = out.read_position[0];
+            counts[out.moves[0] as usize] += 1;
+            if k == 0 {
+                assert_eq!(
+                    out.moves[0],
+                    Move::Lane,
+                    "the first move places the vehicle"
+                );
+            }
+            let (lane, want) = front_lane_pos(&f, a);
+            assert_eq!(lane, 10);
+            // Speed-only moves land the front where blendtrack has it (a
+            // hold to within HOLD_SPEED_MPS * dt).
+            assert!(
+                (sim.pos - want).abs() <= HOLD_SPEED_MPS * DT + 1e-9,
+                "step {k}: simulator {} vs {want}",
+                sim.pos
+            );
+            // The speed sent is the vehicle's own (here scale 1).
+            assert!((out.sumo_speed_mps[0] - out.v_mps[0]).abs() <= HOLD_SPEED_MPS + 1e-9);
+            // Checked every verify_every steps, else not asked for.
+            assert_eq!(
+                read,
+                f.stats(a).unwrap().tracking.steps % 10 == 0,
+                "step {k}"
+            );
+        }
+        assert!(counts[Move::Speed as usize] > 20, "{counts:?}");
+        assert!(
+            counts[Move::Hold as usize] > 10,
+            "cruising needs no command: {counts:?}"
+        );
+        assert_eq!(counts[Move::Lane as usize], 1, "{counts:?}");
+        assert_eq!(counts[Move::Xy as usize], 0, "{counts:?}");
+    }
+
+    #[test]
+    fn a_speed_move_carries_the_vehicle_over_a_lane_end_and_the_position_is_read_back() {
+        // The junction lane follows its lane's centreline within 2 cm: plain enough.
+        let (path, mut route) = road(None, true);
+        route.pieces[1].offset_m = 0.02;
+        let (mut f, t) = fleet_on((path, route));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(150.0, 10.0))
+            .unwrap() as i64;
+        let mut sim = Sim {
+            lanes: vec![(10, 200.0), (11, 10.0), (12, 390.0 * 1.01)],
+            lane: 0,
+            pos: 0.0,
+            speed: 0.0,
+        };
+        let mut read = true;
+        let mut crossings = 0;
+        for k in 0..120 {
+            let before = sim.lane;
+            let out = sim_step(&mut f, a, &mut sim, read);
+            read = out.read_position[0];
+            if k > 0 {
+                assert!(
+                    matches!(out.moves[0], Move::Speed | Move::Hold),
+                    "step {k}: {:?}",
+                    out.moves[0]
+                );
+            }
+            if sim.lane != before {
+                crossings += 1;
+                assert!(read, "after a lane end the simulator's lane is read back");
+            }
+            let (lane, want) = front_lane_pos(&f, a);
+            assert_eq!(lane, sim.lanes[sim.lane].0, "step {k}");
+            assert!(
+                (sim.pos - want).abs() <= HOLD_SPEED_MPS * DT + 1e-9,
+                "step {k}: {} vs {want}",
+                sim.pos
+            );
+        }
+        assert_eq!(crossings, 2);
+        // On lane 12 (scale 1.01) the speed sent is in its lane coordinates.
+        let out = sim_step(&mut f, a, &mut sim, read);
+        assert!((out.sumo_speed_mps[0] / out.v_mps[0] - 1.01).abs() < 1e-3);
+    }
+
+    #[test]
+    fn a_simulator_that_lags_the_prediction_gets_the_vehicle_placed_again() {
+        let (mut f, a, mut sim) = settled_on_lane_10(40.0, 8.0);
+        // The simulator held the vehicle back 1 m (it could not move it).
+        sim.pos -= 1.0;
+        let out = sim_step(&mut f, a, &mut sim, true);
+        assert_eq!(
+            out.moves[0],
+            Move::Lane,
+            "no speed command catches up 1 m in a step: it is placed"
+        );
+        let (_, want) = front_lane_pos(&f, a);
+        assert!((sim.pos - want).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_simulator_a_little_off_is_brought_back_by_the_speed_never_moved_back() {
+        for offset in [0.3, -0.3] {
+            let (mut f, a, mut sim) = settled_on_lane_10(40.0, 8.0);
+            // The simulator has the front 0.3 m ahead of (or behind) blendtrack's.
+            sim.pos += offset;
+            let mut err = offset;
+            for k in 0..40 {
+                let before = sim.pos;
+                let out = sim_step(&mut f, a, &mut sim, true);
+                assert!(
+                    matches!(out.moves[0], Move::Speed | Move::Hold),
+                    "offset {offset}, step {k}: {:?}",
+                    out.moves[0]
+                );
+                assert!(sim.pos >= before, "never backwards");
+                let v = out.v_mps[0];
+                assert!(
+                    (out.sumo_speed_mps[0] - v).abs()
+                        <= GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * v + 1e-9,
+                    "the speed SUMO reports stays near the vehicle's"
+                );
+                let (_, want) = front_lane_pos(&f, a);
+                let now = sim.pos - want;
+                assert!(
+                    now.abs() <= err.abs() + 1e-9,
+                    "offset {offset}, step {k}: {now} vs {err}"
+                );
+                err = now;
+            }
+            assert!(
+                err.abs() < 1e-6,
+                "offset {offset}: made up after 40 steps, {err} left"
+            );
+        }
+    }
+
+    #[test]
+    fn a_vehicle_that_stops_leaves_the_simulator_standing_not_creeping() {
+        // A red light ahead: the vehicle brakes to a stop at the line and
+        // waits; the simulator, moved by the speeds sent, ends where it is.
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        f.set_signal(0, &[Signal::Stop]).unwrap();
+        let a = f
+            .add_vehicle(t, None, None, body(), at(150.0, 10.0))
+            .unwrap() as i64;
+        let mut sim = Sim::on_lane_10();
+        let mut read = true;
+        for _ in 0..3000 {
+            read = sim_step(&mut f, a, &mut sim, read).read_position[0];
+        }
+        let (_, want) = front_lane_pos(&f, a);
+        assert!(f.state(a).unwrap().v_mps.abs() < 1e-3);
+        assert_eq!(sim.speed, 0.0, "the simulator's speed is a standstill");
+        assert!(
+            (sim.pos - want).abs() < 1e-3,
+            "simulator {} vs {want} after 300 s",
+            sim.pos
+        );
+        // The last speed sent was a creep of 4 mm/s (the end of a gentle
+        // approach): the standstill is still sent, no drift for 100 s.
+        sim.speed = 0.004;
+        f.driven[a as usize].as_mut().unwrap().sumo_speed = 0.004;
+        for _ in 0..1000 {
+            read = sim_step(&mut f, a, &mut sim, read).read_position[0];
+        }
+        assert!(
+            (sim.pos - want).abs() < 1e-3,
+            "simulator drifted to {} vs {want}",
+            sim.pos
+        );
+    }
+}

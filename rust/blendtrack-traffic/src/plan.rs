@@ -1,0 +1,533 @@
+//! The first half of a step ([`RouteFleet::plan`]): the simulator's
+//! [`Observations`] (leaders, [`SoftLeaders`], read-back lane positions)
+//! become each vehicle's leader, stop line and yield questions.
+
+use crate::error::check_len;
+use crate::route::Route;
+use crate::signal::{signal_at, Signal};
+use crate::{Driven, RouteFleet, TrafficError, TrafficSettings};
+use blendtrack::longitudinal::stopping_accel;
+use blendtrack::{ControllerConfig, FleetError};
+
+/// One step's observations from the simulator, one entry per listed slot.
+#[derive(Debug, Clone, Copy)]
+pub struct Observations<'a> {
+    pub slots: &'a [i64],
+    /// Gap to the leader (m; NaN = none), the simulator's (minGap left out).
+    pub leader_gap_m: &'a [f64],
+    /// The leader's slot when it is driven here (its speed is known), else < 0.
+    pub leader_slot: &'a [i64],
+    /// The leader's speed when it is not driven here (m/s; NaN = unknown: standing).
+    pub leader_speed_mps: &'a [f64],
+    /// The simulator's lane and lane position of the front, where the bridge
+    /// read them (`lane` < 0 where not read).
+    pub lane: &'a [i64],
+    pub lane_pos_m: &'a [f64],
+    /// Vehicles to line up behind, beside the leader (None: nobody has one).
+    pub soft: Option<SoftLeaders<'a>>,
+}
+
+/// A vehicle each slot lines up behind without it being in the way: one on
+/// the lane beside, ahead of a vehicle that waits to change onto that lane
+/// (or one that is to be let in). Columns as the leader's in
+/// [`Observations`], one entry per slot (gap NaN = none). Braking for it is
+/// bounded at `max_deceleration` (a soft [`blendtrack::Obstacle`]): the vehicle
+/// falls back at most at its planning deceleration and never brakes as in an
+/// emergency for a vehicle that is not on its lane.
+#[derive(Debug, Clone, Copy)]
+pub struct SoftLeaders<'a> {
+    pub gap_m: &'a [f64],
+    pub slot: &'a [i64],
+    pub speed_mps: &'a [f64],
+}
+
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Plan {
+    pub(crate) slots: Vec<i64>,
+    pub(crate) leader_gap: Vec<f64>,
+    pub(crate) leader_speed: Vec<f64>,
+    pub(crate) stop_gap: Vec<f64>,
+    pub(crate) soft_gap: Vec<f64>,
+    pub(crate) soft_speed: Vec<f64>,
+    pub(crate) limit: Vec<f64>,
+    /// Gap to the stop line of a link that waits for the simulator's word on foes.
+    pub(crate) yield_gap: Vec<f64>,
+    pub(crate) queries: Vec<usize>,
+}
+
+/// True when the stopping law stops a vehicle at speed `v` within `gap` at
+/// no more than the planning deceleration.
+pub fn can_stop(cfg: &ControllerConfig, v: f64, gap_m: f64) -> bool {
+    let a = stopping_accel(
+        v,
+        gap_m,
+        0.0,
+        cfg.preferred_stop_dist,
+        cfg.reaction_time,
+        cfg.max_deceleration,
+        cfg.max_obs_deceleration,
+    );
+    a >= cfg.max_deceleration
+}
+
+impl RouteFleet {
+    /// A leader's speed: its state's where it is driven here (`slot` >= 0),
+    /// else `given`.
+    fn speed_of(&self, slot: i64, given: f64) -> f64 {
+        usize::try_from(slot)
+            .ok()
+            .and_then(|l| self.driven.get(l))
+            .and_then(Option::as_ref)
+            .map_or(given, |d| d.state.v_mps)
+    }
+
+    /// First half of a step: stop lines and leaders. Returns the indices (into
+    /// `obs.slots`) of the vehicles approaching a link without priority:
+    /// [`RouteFleet::step`] needs, for each, whether it must give way.
+    pub fn plan(&mut self, obs: &Observations<'_>) -> Result<Vec<usize>, TrafficError> {
+        self.check_observations(obs)?;
+        let n = obs.slots.len();
+        let mut plan = Plan {
+            slots: obs.slots.to_vec(),
+            leader_gap: vec![f64::NAN; n],
+            leader_speed: vec![f64::NAN; n],
+            stop_gap: vec![f64::NAN; n],
+            soft_gap: vec![f64::NAN; n],
+            soft_speed: vec![f64::NAN; n],
+            limit: vec![f64::NAN; n],
+            yield_gap: vec![f64::NAN; n],
+            queries: Vec::new(),
+        };
+        for i in 0..n {
+            self.plan_leaders(obs, i, &mut plan);
+            self.plan_vehicle(obs, i, &mut plan)?;
+        }
+        let queries = plan.queries.clone();
+        self.plan = Some(plan);
+        Ok(queries)
+    }
+
+    /// One entry per slot in every column, each slot driven here and listed once.
+    fn check_observations(&self, obs: &Observations<'_>) -> Result<(), TrafficError> {
+        let n = obs.slots.len();
+        check_len("leader_gap", n, obs.leader_gap_m.len())?;
+        check_len("leader_slot", n, obs.leader_slot.len())?;
+        check_len("leader_speed", n, obs.leader_speed_mps.len())?;
+        check_len("lane", n, obs.lane.len())?;
+        check_len("lane_pos", n, obs.lane_pos_m.len())?;
+        if let Some(sl) = &obs.soft {
+            check_len("soft_gap", n, sl.gap_m.len())?;
+            check_len("soft_slot", n, sl.slot.len())?;
+            check_len("soft_speed", n, sl.speed_mps.len())?;
+        }
+        let mut seen = vec![false; self.driven.len()];
+        for &slot in obs.slots {
+            self.driven(slot)?;
+            if std::mem::replace(&mut seen[slot as usize], true) {
+                return Err(FleetError::DuplicateSlot { slot }.into());
+            }
+        }
+        Ok(())
+    }
+
+    /// The leader and the soft leader of entry `i`, kept a margin behind.
+    fn plan_leaders(&self, obs: &Observations<'_>, i: usize, plan: &mut Plan) {
+        let margin = self.settings.standstill_margin_m;
+        let gap = obs.leader_gap_m[i];
+        if gap.is_finite() {
+            // The simulator's gap leaves out minGap, and the simulator
+            // counts anything closer as a collision: stop further back.
+            plan.leader_gap[i] = gap - margin;
+            plan.leader_speed[i] = self.speed_of(obs.leader_slot[i], obs.leader_speed_mps[i]);
+        }
+        if let Some(sl) = &obs.soft {
+            if sl.gap_m[i].is_finite() {
+                plan.soft_gap[i] = sl.gap_m[i] - margin;
+                plan.soft_speed[i] = self.speed_of(sl.slot[i], sl.speed_mps[i]);
+            }
+        }
+    }
+
+    /// Entry `i`'s speed limit, stop line (or the yield question it asks),
+    /// and the lane position the simulator reported for it.
+    fn plan_vehicle(
+        &mut self,
+        obs: &Observations<'_>,
+        i: usize,
+        plan: &mut Plan,
+    ) -> Result<(), TrafficError> {
+        let st = self.settings;
+        let slot = obs.slots[i] as usize;
+        let cfg = self.fleet.vehicle_config(slot as i64)?;
+        let d = self.driven[slot].as_ref().expect("checked above");
+        let route = &d.route;
+        let sf = d.s_front_m;
+        plan.limit[i] = route.pieces[route.piece_at(sf)].speed_mps;
+        let mut next = d.next_stop;
+        while next < route.stops.len() && route.stops[next].s_m < sf - 0.5 {
+            next += 1;
+        }
+        let leader = (plan.leader_gap[i], plan.leader_speed[i]);
+        let mut dec = decide_stop(d, next, cfg, &self.signals, leader, &st);
+        if let Some(gap) = dec.yield_gap {
+            plan.yield_gap[i] = gap;
+            plan.queries.push(i);
+        }
+        let end_gap = route_end_gap(route, sf, &st);
+        if end_gap < st.route_end_horizon_m {
+            dec.stop_gap = if dec.stop_gap.is_nan() {
+                end_gap
+            } else {
+                dec.stop_gap.min(end_gap)
+            };
+        }
+        plan.stop_gap[i] = dec.stop_gap;
+        let lane = obs.lane[i];
+        let known =
+            (lane >= 0 && obs.lane_pos_m[i].is_finite()).then(|| (lane as u32, obs.lane_pos_m[i]));
+        let d = self.driven[slot].as_mut().expect("checked above");
+        d.next_stop = next;
+        d.yellow = dec.yellow;
+        d.holding = dec.holding;
+        if known.is_some() {
+            d.known = known;
+        }
+        Ok(())
+    }
+}
+
+/// What a vehicle does at the stop line it approaches.
+#[derive(Debug, Clone, Copy)]
+struct StopDecision {
+    /// (stop index, stop?) decided at a yellow light.
+    yellow: Option<(usize, bool)>,
+    /// The stop line it waits at to give way or keep the junction clear.
+    holding: Option<usize>,
+    /// Gap to where it stops (m; NaN: no stop).
+    stop_gap: f64,
+    /// Gap to the line of a link that needs the simulator's word on foes.
+    yield_gap: Option<f64>,
+}
+
+/// The decision of vehicle `d` at stop line `next` of its route (if any),
+/// behind a leader (gap, speed; NaN: none) at the planning deceleration.
+fn decide_stop(
+    d: &Driven,
+    next: usize,
+    cfg: &ControllerConfig,
+    signals: &[Vec<Signal>],
+    (lg, lv): (f64, f64),
+    st: &TrafficSettings,
+) -> StopDecision {
+    let margin = st.standstill_margin_m;
+    let sf = d.s_front_m;
+    let v = d.state.v_mps.abs();
+    let mut dec = StopDecision {
+        yellow: d.yellow,
+        holding: d.holding.filter(|&k| k == next),
+        stop_gap: f64::NAN,
+        yield_gap: None,
+    };
+    let Some(stop) = d.route.stops.get(next) else {
+        return dec;
+    };
+    let gap = stop.s_m - sf - margin;
+    let sig = signal_at(signals, stop);
+    if sig != Signal::Yellow {
+        dec.yellow = None;
+    }
+    let lv = if lv.is_finite() { lv.max(0.0) } else { 0.0 };
+    match sig {
+        Signal::Stop => dec.stop_gap = gap,
+        Signal::Yellow => {
+            // The decision holds until the light changes: decided
+            // anew every step it flips to "go" as the line nears
+            // (the law brakes harder than b_f at the end) and then
+            // fails to stop at red.
+            let decision = match dec.yellow {
+                Some((k, stop_here)) if k == next => stop_here,
+                _ => can_stop(cfg, v, gap),
+            };
+            dec.yellow = Some((next, decision));
+            if decision {
+                dec.stop_gap = gap;
+            }
+        }
+        Signal::Priority | Signal::Yield => {
+            let near = gap < st.yield_lookahead_m;
+            let held = d.holding == Some(next);
+            // Where the leader's back would stop if it braked now at 4 m/s^2.
+            let blocked = lg.is_finite()
+                && sf + lg + margin + lv * lv / 8.0 - stop.exit_m
+                    < d.body.length_m + d.body.min_gap_m + margin;
+            if near && blocked && (held || can_stop(cfg, v, gap)) {
+                // Keep the junction clear: no room behind the
+                // leader on the far side, so wait at the line.
+                dec.stop_gap = gap;
+                dec.holding = Some(next);
+            } else if (sig == Signal::Yield || stop.check_inside)
+                && near
+                && (held || can_stop(cfg, v, gap))
+            {
+                // Give way while the simulator reports foes (or,
+                // with the right of way, while the caller sees a
+                // vehicle inside the junction in the way); too
+                // late to stop, clear the junction instead.
+                dec.yield_gap = Some(gap);
+            } else {
+                dec.holding = None;
+            }
+        }
+    }
+    dec
+}
+
+/// The gap to where the route's end stops a vehicle whose front is at `sf`.
+/// A track that stops where a lane change is due ends `lane_change_room_m`
+/// early: the vehicle waits there for a gap. The end of the route (with
+/// `stop_at_route_end`): a standing obstacle a little past the track's end,
+/// so the vehicle slows down and the simulator sees it arrive. Otherwise
+/// (+inf) the vehicle drives through its route's end and the simulator's own
+/// movement (a speed move near a lane's end) carries it out.
+fn route_end_gap(route: &Route, sf: f64, st: &TrafficSettings) -> f64 {
+    if route.lane_change.is_some() {
+        route.length_m - st.lane_change_room_m - sf - st.standstill_margin_m
+    } else if st.stop_at_route_end {
+        route.length_m + st.route_end_extra_m - sf
+    } else {
+        f64::INFINITY
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::testkit::*;
+    use crate::*;
+
+    #[test]
+    fn red_light_stops_the_vehicle_before_the_line_then_green_lets_it_go() {
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(100.0, 12.0))
+            .unwrap() as i64;
+        f.set_signal(0, &[Signal::Stop]).unwrap();
+        for _ in 0..400 {
+            let (_, out) = step(&mut f, &[slot], false);
+            assert!(!out.red_light[0]);
+        }
+        let sf = f.s_front(slot).unwrap();
+        let v = f.state(slot).unwrap().v_mps;
+        assert!(v.abs() < 0.05, "stands at red: v = {v}");
+        assert!(
+            (195.0..200.0).contains(&sf),
+            "front {sf} m stops before the line"
+        );
+        f.set_signal(0, &[Signal::Priority]).unwrap();
+        for _ in 0..200 {
+            step(&mut f, &[slot], false);
+        }
+        assert!(f.s_front(slot).unwrap() > 220.0, "green: drives on");
+        assert_eq!(f.stats(slot).unwrap().red_light_violations, 0);
+    }
+
+    #[test]
+    fn a_yellow_decision_holds_until_the_light_changes() {
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(120.0, 12.0))
+            .unwrap() as i64;
+        f.set_signal(0, &[Signal::Yellow]).unwrap();
+        for _ in 0..300 {
+            let (_, out) = step(&mut f, &[slot], false);
+            assert!(!out.red_light[0]);
+        }
+        // Far enough to stop comfortably: it stopped, and the decision did
+        // not flip to "go" as the line came near.
+        let sf = f.s_front(slot).unwrap();
+        assert!(
+            sf < 200.0 && f.state(slot).unwrap().v_mps.abs() < 0.05,
+            "front {sf}"
+        );
+        // Close to the line at speed when it turns yellow: it goes through.
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(200.0 - 3.5 - 4.0, 14.0))
+            .unwrap() as i64;
+        f.set_signal(0, &[Signal::Yellow]).unwrap();
+        for _ in 0..20 {
+            step(&mut f, &[slot], false);
+        }
+        assert!(f.s_front(slot).unwrap() > 210.0);
+    }
+
+    #[test]
+    fn a_junction_checked_for_vehicles_inside_asks_even_with_the_right_of_way() {
+        // A major road and a green light: without the check neither asks
+        // (see links_without_priority_ask_and_wait_only_when_told_to); with
+        // it the vehicle asks near the line and waits only when told to.
+        for signal in [None, Some((0, 0))] {
+            for blocked in [true, false] {
+                let (path, mut route) = road(signal, true);
+                route.stops[0].check_inside = true;
+                let (mut f, t) = fleet_on((path, route));
+                if signal.is_some() {
+                    f.set_signal(0, &[Signal::Priority]).unwrap();
+                }
+                let slot = f
+                    .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+                    .unwrap() as i64;
+                let mut asked = 0;
+                for _ in 0..300 {
+                    asked += step(&mut f, &[slot], blocked).0.len();
+                }
+                assert!(asked > 0, "{signal:?}: asks within the look-ahead");
+                let sf = f.s_front(slot).unwrap();
+                if blocked {
+                    assert!(
+                        sf < 200.0 && f.state(slot).unwrap().v_mps.abs() < 0.05,
+                        "{signal:?}: waits at the line, front {sf}"
+                    );
+                } else {
+                    assert!(sf > 300.0, "{signal:?}: clear, drives through: front {sf}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn links_without_priority_ask_and_wait_only_when_told_to() {
+        for must_yield in [true, false] {
+            let (mut f, t) = fleet_on(road(None, false));
+            let slot = f
+                .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+                .unwrap() as i64;
+            let mut asked = 0;
+            for _ in 0..300 {
+                let (q, _) = step(&mut f, &[slot], must_yield);
+                asked += q.len();
+            }
+            assert!(asked > 0, "within the look-ahead the vehicle asks");
+            let sf = f.s_front(slot).unwrap();
+            if must_yield {
+                assert!(sf < 200.0, "waits at the line: front {sf}");
+            } else {
+                assert!(sf > 300.0, "no foes: drives through, front {sf}");
+            }
+        }
+        // A major road never asks.
+        let (mut f, t) = fleet_on(road(None, true));
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+            .unwrap() as i64;
+        for _ in 0..100 {
+            assert!(step(&mut f, &[slot], true).0.is_empty());
+        }
+    }
+
+    #[test]
+    fn the_junction_is_kept_clear_when_the_leader_leaves_no_room_beyond_it() {
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        f.set_signal(0, &[Signal::Priority]).unwrap();
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(160.0, 8.0))
+            .unwrap() as i64;
+        for _ in 0..300 {
+            let sf = f.s_front(slot).unwrap();
+            // A standing leader whose back is 3 m past the junction's exit.
+            let gap = 213.0 - sf;
+            f.plan(&Observations {
+                slots: &[slot],
+                leader_gap_m: &[gap],
+                leader_slot: &[-1],
+                leader_speed_mps: &[0.0],
+                lane: &[-1],
+                lane_pos_m: &[f64::NAN],
+                soft: None,
+            })
+            .unwrap();
+            f.step(&[], DT).unwrap();
+        }
+        let sf = f.s_front(slot).unwrap();
+        assert!(
+            sf < 200.0,
+            "waits before the line, not inside the junction: front {sf}"
+        );
+    }
+
+    #[test]
+    fn a_driven_leader_s_speed_comes_from_its_state() {
+        let (mut f, t) = fleet_on(road(None, true));
+        let lead = f
+            .add_vehicle(t, None, None, body(), at(60.0, 14.0))
+            .unwrap() as i64;
+        let fol = f
+            .add_vehicle(t, None, None, body(), at(40.0, 14.0))
+            .unwrap() as i64;
+        let accel = |f: &mut RouteFleet, leader_slot: i64| {
+            let mut g = f.clone();
+            g.plan(&Observations {
+                slots: &[fol],
+                leader_gap_m: &[12.0],
+                leader_slot: &[leader_slot],
+                leader_speed_mps: &[f64::NAN],
+                lane: &[-1],
+                lane_pos_m: &[f64::NAN],
+                soft: None,
+            })
+            .unwrap();
+            g.step(&[], DT).unwrap().accel_mps2[0]
+        };
+        let moving = accel(&mut f, lead);
+        let unknown = accel(&mut f, -1);
+        assert!(
+            moving > unknown + 0.5,
+            "a leader at 14 m/s ({moving}) is not a standing one ({unknown})"
+        );
+    }
+
+    #[test]
+    fn the_vehicle_stops_at_the_end_of_its_route_when_set_to() {
+        let settings = TrafficSettings {
+            stop_at_route_end: true,
+            ..Default::default()
+        };
+        let (mut f, t) = fleet_with(road(None, true), settings);
+        let a = f
+            .add_vehicle(t, None, None, body(), at(400.0, 15.0))
+            .unwrap() as i64;
+        for _ in 0..400 {
+            step(&mut f, &[a], false);
+        }
+        let sf = f.s_front(a).unwrap();
+        assert!(
+            sf > 590.0 && sf < 605.0,
+            "stops around the route's end (+5 m): {sf}"
+        );
+    }
+
+    #[test]
+    fn by_default_the_vehicle_drives_through_the_end_of_its_route() {
+        // Like SUMO's drivers (arrivalSpeed "current"): no slowing down for
+        // the route's end at 600 m; the simulator takes the vehicle out there.
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(400.0, 15.0))
+            .unwrap() as i64;
+        let mut slowest = f64::INFINITY;
+        while f.s_front(a).unwrap() < 600.0 {
+            let out = step(&mut f, &[a], false).1;
+            assert!(out.moves[0] != Move::Invalid);
+            slowest = slowest.min(out.v_mps[0]);
+        }
+        assert!(
+            slowest > 14.5,
+            "kept its speed to the end: slowest {slowest} m/s"
+        );
+        // A few steps past the end (the simulator is late to take it out):
+        // still a usable move, no panic.
+        for _ in 0..10 {
+            let out = step(&mut f, &[a], false).1;
+            assert!(out.moves[0] != Move::Invalid && out.v_mps[0].is_finite());
+        }
+    }
+}

@@ -1,0 +1,242 @@
+//! A route's tables along its track: lane [`Piece`]s, junction
+//! [`StopLine`]s and the [`LaneChangeDue`] on the way, checked once in
+//! [`Route::new`].
+
+use crate::error::TrafficError;
+
+/// One lane along a route's track.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Piece {
+    /// Arc length where the piece starts on the track (m).
+    pub start_m: f64,
+    /// The simulator's lane position at `start_m` (m; 0 when the piece
+    /// starts where its lane starts).
+    pub lane_pos_start_m: f64,
+    /// Simulator lane length per metre of track.
+    pub scale: f64,
+    /// The simulator's length of the lane (m).
+    pub lane_length_m: f64,
+    /// Largest distance between the track and the lane's centreline over the
+    /// piece (m); +inf where the track leaves the lane (a lane change). A
+    /// vehicle is handed to the simulator as (lane, position) only while its
+    /// lateral error plus this stays under the settings' bound.
+    pub offset_m: f64,
+    /// Speed limit (m/s).
+    pub speed_mps: f64,
+    /// The caller's ids of the lane and its edge, and the lane's index on the edge.
+    pub lane: u32,
+    pub edge: u32,
+    pub lane_index: u32,
+}
+
+/// A junction entry along a route's track.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StopLine {
+    /// Arc length of the stop line (m).
+    pub s_m: f64,
+    /// (light, link index) when signalised.
+    pub signal: Option<(usize, usize)>,
+    /// Right of way by the network, for an unsignalised link.
+    pub major: bool,
+    /// The caller's id of the first junction lane (to ask about foes).
+    pub via: u32,
+    /// Arc length where the junction is left (m; +inf when unknown).
+    pub exit_m: f64,
+    /// Ask the caller before entering even with the right of way: the
+    /// junction has other vehicles' lanes crossing or touching this one, and
+    /// a vehicle standing inside it (a left turner at its waiting point, a
+    /// vehicle left over from a jam) may be in the way.
+    pub check_inside: bool,
+}
+
+/// A lane change the route needs on one edge, made when the simulator says
+/// there is room: until then the track ends early on the current lane.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct LaneChangeDue {
+    pub edge: u32,
+    pub target_index: u32,
+}
+
+/// Lanes and stop lines along a track (see the module docs).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Route {
+    pub(crate) pieces: Vec<Piece>,
+    pub(crate) stops: Vec<StopLine>,
+    pub(crate) length_m: f64,
+    pub(crate) lane_change: Option<LaneChangeDue>,
+}
+
+impl Route {
+    /// Checks the tables: at least one piece, finite increasing piece starts,
+    /// positive scales, positive speed limits, finite stop lines sorted by arc
+    /// length, a finite positive length.
+    pub fn new(
+        pieces: Vec<Piece>,
+        stops: Vec<StopLine>,
+        length_m: f64,
+        lane_change: Option<LaneChangeDue>,
+    ) -> Result<Route, TrafficError> {
+        let bad = |m: String| Err(TrafficError::Route(m));
+        if pieces.is_empty() {
+            return bad("no lane pieces".into());
+        }
+        if !(length_m.is_finite() && length_m > 0.0) {
+            return bad(format!("length {length_m} m is not finite and > 0"));
+        }
+        for (i, p) in pieces.iter().enumerate() {
+            if !p.start_m.is_finite() || (i > 0 && p.start_m < pieces[i - 1].start_m) {
+                return bad(format!(
+                    "piece {i} starts at {} m: starts must be finite and increasing",
+                    p.start_m
+                ));
+            }
+            // (what, value, unit, allowed, rule)
+            let checks = [
+                (
+                    "has lane scale",
+                    p.scale,
+                    "",
+                    p.scale > 0.0,
+                    "finite and > 0",
+                ),
+                (
+                    "starts at lane position",
+                    p.lane_pos_start_m,
+                    " m",
+                    p.lane_pos_start_m >= 0.0,
+                    "finite and >= 0",
+                ),
+                (
+                    "has lane length",
+                    p.lane_length_m,
+                    " m",
+                    p.lane_length_m > 0.0,
+                    "finite and > 0",
+                ),
+            ];
+            for (what, value, unit, ok, rule) in checks {
+                if !(value.is_finite() && ok) {
+                    return bad(format!("piece {i} {what} {value}{unit}: must be {rule}"));
+                }
+            }
+            if p.offset_m.is_nan() || p.offset_m < 0.0 {
+                return bad(format!(
+                    "piece {i} has offset {} m: must be >= 0 (+inf: off the lane)",
+                    p.offset_m
+                ));
+            }
+            if !(p.speed_mps > 0.0) {
+                return bad(format!(
+                    "piece {i} has speed limit {} m/s: must be > 0",
+                    p.speed_mps
+                ));
+            }
+        }
+        for (i, s) in stops.iter().enumerate() {
+            if !s.s_m.is_finite() || (i > 0 && s.s_m < stops[i - 1].s_m) {
+                return bad(format!(
+                    "stop line {i} at {} m: must be finite and sorted",
+                    s.s_m
+                ));
+            }
+            if s.exit_m.is_nan() {
+                return bad(format!("stop line {i} has a NaN exit"));
+            }
+        }
+        Ok(Route {
+            pieces,
+            stops,
+            length_m,
+            lane_change,
+        })
+    }
+
+    /// Index of the piece holding arc length `s` (clamped to the pieces).
+    pub fn piece_at(&self, s: f64) -> usize {
+        self.pieces
+            .partition_point(|p| p.start_m <= s)
+            .saturating_sub(1)
+    }
+
+    pub fn pieces(&self) -> &[Piece] {
+        &self.pieces
+    }
+    pub fn stops(&self) -> &[StopLine] {
+        &self.stops
+    }
+    pub fn length_m(&self) -> f64 {
+        self.length_m
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::testkit::*;
+    use crate::*;
+
+    #[test]
+    fn route_tables_are_checked() {
+        let p = |start_m| Piece {
+            start_m,
+            lane_pos_start_m: 0.0,
+            scale: 1.0,
+            lane_length_m: 100.0,
+            offset_m: 0.0,
+            speed_mps: 10.0,
+            lane: 0,
+            edge: 0,
+            lane_index: 0,
+        };
+        assert!(matches!(
+            Route::new(vec![], vec![], 10.0, None),
+            Err(TrafficError::Route(_))
+        ));
+        let e = Route::new(vec![p(0.0), p(5.0), p(3.0)], vec![], 10.0, None).unwrap_err();
+        assert!(e.to_string().contains("piece 2"), "{e}");
+        assert!(Route::new(vec![p(0.0)], vec![], f64::NAN, None).is_err());
+        let r = Route::new(vec![p(0.0), p(5.0), p(5.0), p(9.0)], vec![], 10.0, None).unwrap();
+        assert_eq!(
+            [
+                r.piece_at(-1.0),
+                r.piece_at(4.99),
+                r.piece_at(5.0),
+                r.piece_at(9.5),
+                r.piece_at(99.0)
+            ],
+            [0, 0, 2, 3, 3]
+        );
+    }
+
+    #[test]
+    fn piece_tables_with_bad_lane_positions_lengths_or_offsets_are_rejected() {
+        let (_, route) = road(None, true);
+        for (k, bad) in [
+            (
+                0,
+                Piece {
+                    lane_pos_start_m: -1.0,
+                    ..route.pieces[0]
+                },
+            ),
+            (
+                1,
+                Piece {
+                    lane_length_m: 0.0,
+                    ..route.pieces[1]
+                },
+            ),
+            (
+                2,
+                Piece {
+                    offset_m: f64::NAN,
+                    ..route.pieces[2]
+                },
+            ),
+        ] {
+            let mut pieces = route.pieces.clone();
+            pieces[k] = bad;
+            let e = Route::new(pieces, route.stops.clone(), 600.0, None).unwrap_err();
+            assert!(e.to_string().contains(&format!("piece {k}")), "{e}");
+        }
+    }
+}

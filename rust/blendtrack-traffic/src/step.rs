@@ -1,0 +1,316 @@
+//! The second half of a step ([`RouteFleet::step`]): the yield answers, the
+//! fleet's controllers and bicycle models, the choice of each [`Move`], and
+//! the statistics; results in [`RouteOutputs`].
+
+use crate::error::check_len;
+use crate::placement::{choose_move, Motion, Move};
+use crate::plan::Plan;
+use crate::signal::{signal_at, Signal};
+use crate::stats::StepRecord;
+use crate::{Driven, RouteFleet, TrafficError};
+use blendtrack::path::wrap_angle;
+use blendtrack::{Fleet, FleetInputs, FleetOutputs, NextStates, VehicleState};
+use nalgebra::Point2;
+
+/// One step's results, one entry per planned slot, in the plan's order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RouteOutputs {
+    pub moves: Vec<Move>,
+    /// For [`Move::Lane`]: lane and position; for [`Move::Xy`]: edge and lane index.
+    pub lane: Vec<u32>,
+    pub lane_pos_m: Vec<f64>,
+    pub edge: Vec<u32>,
+    pub lane_index: Vec<u32>,
+    /// Front-bumper point and SUMO angle (deg, clockwise from north).
+    pub x_front_m: Vec<f64>,
+    pub y_front_m: Vec<f64>,
+    pub angle_deg: Vec<f64>,
+    /// The new state.
+    pub x_m: Vec<f64>,
+    pub y_m: Vec<f64>,
+    pub theta_rad: Vec<f64>,
+    pub v_mps: Vec<f64>,
+    pub delta_rad: Vec<f64>,
+    pub accel_mps2: Vec<f64>,
+    pub lateral_error_m: Vec<f64>,
+    pub heading_error_rad: Vec<f64>,
+    pub s_rear_m: Vec<f64>,
+    pub curvature_per_m: Vec<f64>,
+    pub virtual_obstacle_m: Vec<f64>,
+    /// The front crossed a stop line whose light is red in this step.
+    pub red_light: Vec<bool>,
+    /// A lane change is due where the vehicle now is: ask the simulator for room.
+    pub lane_change_due: Vec<bool>,
+    /// Report the simulator's lane and lane position next step: unknown to
+    /// blendtrack, or due for a check of the prediction.
+    pub read_position: Vec<bool>,
+    /// The speed to give the simulator (m/s): the vehicle's own, or for a
+    /// speed-only move the one that carries the front to its new place.
+    pub sumo_speed_mps: Vec<f64>,
+}
+
+impl RouteOutputs {
+    /// Empty columns with room for `n` vehicles (no growing in the step loop).
+    fn with_capacity(n: usize) -> Self {
+        RouteOutputs {
+            moves: Vec::with_capacity(n),
+            lane: Vec::with_capacity(n),
+            lane_pos_m: Vec::with_capacity(n),
+            edge: Vec::with_capacity(n),
+            lane_index: Vec::with_capacity(n),
+            x_front_m: Vec::with_capacity(n),
+            y_front_m: Vec::with_capacity(n),
+            angle_deg: Vec::with_capacity(n),
+            x_m: Vec::with_capacity(n),
+            y_m: Vec::with_capacity(n),
+            theta_rad: Vec::with_capacity(n),
+            v_mps: Vec::with_capacity(n),
+            delta_rad: Vec::with_capacity(n),
+            accel_mps2: Vec::with_capacity(n),
+            lateral_error_m: Vec::with_capacity(n),
+            heading_error_rad: Vec::with_capacity(n),
+            s_rear_m: Vec::with_capacity(n),
+            curvature_per_m: Vec::with_capacity(n),
+            virtual_obstacle_m: Vec::with_capacity(n),
+            red_light: Vec::with_capacity(n),
+            lane_change_due: Vec::with_capacity(n),
+            read_position: Vec::with_capacity(n),
+            sumo_speed_mps: Vec::with_capacity(n),
+        }
+    }
+}
+
+impl RouteFleet {
+    /// Second half of a step: `must_yield[j]` answers the `j`-th index
+    /// returned by [`RouteFleet::plan`]. Steps every planned vehicle over `dt_s`.
+    ///
+    /// Stages: the yield answers become stop lines ([`Self::answer_yields`]),
+    /// the planned vehicles' states are packed into the fleet's inputs and
+    /// stepped, then each vehicle's move is chosen, its red-light crossing
+    /// detected and its statistics accumulated ([`Self::step_vehicle`]).
+    pub fn step(&mut self, must_yield: &[bool], dt_s: f64) -> Result<RouteOutputs, TrafficError> {
+        if !(dt_s.is_finite() && dt_s > 0.0) {
+            return Err(TrafficError::Parameter {
+                name: "dt",
+                value: dt_s,
+                message: "must be finite and > 0",
+            });
+        }
+        let Some(plan) = self.plan.as_ref() else {
+            return Err(TrafficError::NoPlan);
+        };
+        check_len("must_yield", plan.queries.len(), must_yield.len())?;
+        let mut plan = self.plan.take().expect("checked above");
+        self.answer_yields(&mut plan, must_yield);
+        let out = self.step_fleet(&plan, dt_s)?;
+        let next = out.next.as_ref().expect("dt was given");
+        let mut r = RouteOutputs::with_capacity(plan.slots.len());
+        for i in 0..plan.slots.len() {
+            self.step_vehicle(&plan, i, &out, next, dt_s, &mut r)?;
+        }
+        Ok(r)
+    }
+
+    /// Stage 1: a vehicle told to give way stops at the line it asked about
+    /// (and holds there while the reason lasts); one told it may go does not.
+    fn answer_yields(&mut self, plan: &mut Plan, must_yield: &[bool]) {
+        for (&i, &y) in plan.queries.iter().zip(must_yield) {
+            let d = self.driven[plan.slots[i] as usize]
+                .as_mut()
+                .expect("planned slots are driven");
+            if y {
+                let g = plan.yield_gap[i];
+                plan.stop_gap[i] = if plan.stop_gap[i].is_nan() {
+                    g
+                } else {
+                    plan.stop_gap[i].min(g)
+                };
+                d.holding = Some(d.next_stop);
+            } else {
+                d.holding = None;
+            }
+        }
+    }
+
+    /// Stage 2: the planned vehicles' states and the plan's leaders, stop
+    /// lines and limits packed into the fleet's inputs, stepped over `dt_s`.
+    fn step_fleet(&mut self, plan: &Plan, dt_s: f64) -> Result<FleetOutputs, TrafficError> {
+        let n = plan.slots.len();
+        let mut cols: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
+        for &slot in &plan.slots {
+            let s = self.driven[slot as usize]
+                .as_ref()
+                .expect("planned slots are driven")
+                .state;
+            for (c, x) in cols
+                .iter_mut()
+                .zip([s.x_m, s.y_m, s.theta_rad, s.v_mps, s.delta_rad])
+            {
+                c.push(x);
+            }
+        }
+        let inputs = FleetInputs {
+            leader_gap_m: Some(&plan.leader_gap),
+            leader_speed_mps: Some(&plan.leader_speed),
+            stop_gap_m: Some(&plan.stop_gap),
+            soft_gap_m: Some(&plan.soft_gap),
+            soft_speed_mps: Some(&plan.soft_speed),
+            speed_limit_mps: Some(&plan.limit),
+            dt_s: Some(dt_s),
+            ..FleetInputs::new(
+                &plan.slots,
+                &cols[0],
+                &cols[1],
+                &cols[2],
+                &cols[3],
+                &cols[4],
+            )
+        };
+        Ok(self.fleet.step(&inputs)?)
+    }
+
+    /// Stage 3, per vehicle: where its front is on its track after the
+    /// step, the move that puts it into the simulator, a red-light
+    /// crossing, its statistics, and its row of the outputs.
+    fn step_vehicle(
+        &mut self,
+        plan: &Plan,
+        i: usize,
+        out: &FleetOutputs,
+        next: &NextStates,
+        dt_s: f64,
+        r: &mut RouteOutputs,
+    ) -> Result<(), TrafficError> {
+        let slot = plan.slots[i] as usize;
+        let params = *self.fleet.vehicle_params(slot as i64)?;
+        let d = self.driven[slot]
+            .as_mut()
+            .expect("planned slots are driven");
+        let state = VehicleState {
+            x_m: next.x_m[i],
+            y_m: next.y_m[i],
+            theta_rad: next.theta_rad[i],
+            v_mps: next.v_mps[i],
+            delta_rad: next.delta_rad[i],
+        };
+        let finite = [
+            state.x_m,
+            state.y_m,
+            state.theta_rad,
+            state.v_mps,
+            state.delta_rad,
+            out.s_rear_m[i],
+        ]
+        .iter()
+        .all(|x| x.is_finite());
+        let (v, th) = (state.v_mps, state.theta_rad);
+        let reach = d.body.reach_m;
+        let (xf, yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());
+        // The front's arc length at the NEW state (the controller's
+        // outputs are of the state it was given, one step behind).
+        let sf_new = if finite {
+            front_arc_after(&self.fleet, slot, d, Point2::new(xf, yf), v * dt_s)?
+        } else {
+            f64::NAN
+        };
+        let k = if finite { d.route.piece_at(sf_new) } else { 0 };
+        let piece = d.route.pieces[k];
+        let motion = Motion {
+            usable: out.ok[i] && finite,
+            lateral_error_m: out.lateral_error_m[i],
+            heading_error_rad: out.heading_error_rad[i],
+            v_mps: v,
+            s_front_m: sf_new,
+            dt_s,
+        };
+        let st = self.settings;
+        let p = choose_move(d, k, &st, &motion);
+        let mut red = false;
+        let mut due = false;
+        if p.mv != Move::Invalid {
+            red = crossed_red(&self.signals, d, sf_new);
+            if red {
+                d.stats.red_light_violations += 1;
+            }
+            if let Some(lc) = d.route.lane_change {
+                due = piece.edge == lc.edge && piece.lane_index != lc.target_index;
+            }
+            let acc = (v - d.state.v_mps) / dt_s;
+            let step = StepRecord {
+                lateral_error_m: motion.lateral_error_m,
+                lateral_error_rear_m: out.lateral_error_rear_m[i],
+                lateral_error_front_m: out.lateral_error_front_m[i],
+                heading_error_rad: motion.heading_error_rad,
+                v_mps: v,
+                accel_mps2: acc,
+                lateral_accel_mps2: v * v * state.delta_rad.tan() / params.wheelbase_m,
+                curvature_per_m: out.curvature_per_m[i],
+                speed_limit_mps: plan.limit[i],
+                dt_s,
+            };
+            if let Some(sample) = d.stats.add_step(&step, &st) {
+                self.samples.push(sample);
+            }
+            r.accel_mps2.push(acc);
+            d.state = state;
+            d.s_front_m = sf_new;
+            d.known = p.predicted;
+            d.sumo_speed = p.sumo_speed;
+        } else {
+            r.accel_mps2.push(f64::NAN);
+        }
+        r.moves.push(p.mv);
+        r.lane.push(piece.lane);
+        r.lane_pos_m.push(p.pos);
+        r.edge.push(piece.edge);
+        r.lane_index.push(piece.lane_index);
+        r.x_front_m.push(xf);
+        r.y_front_m.push(yf);
+        r.angle_deg
+            .push((90.0 - wrap_angle(th).to_degrees()).rem_euclid(360.0));
+        r.x_m.push(state.x_m);
+        r.y_m.push(state.y_m);
+        r.theta_rad.push(th);
+        r.v_mps.push(v);
+        r.delta_rad.push(state.delta_rad);
+        r.lateral_error_m.push(motion.lateral_error_m);
+        r.heading_error_rad.push(motion.heading_error_rad);
+        r.s_rear_m.push(out.s_rear_m[i]);
+        r.curvature_per_m.push(out.curvature_per_m[i]);
+        r.virtual_obstacle_m.push(out.virtual_obstacle_m[i]);
+        r.red_light.push(red);
+        r.lane_change_due.push(due);
+        // Read back where the prediction ends, and now and then to check it.
+        let verify = st.verify_every > 0 && d.stats.tracking.steps % st.verify_every == 0;
+        r.read_position
+            .push(p.mv != Move::Invalid && (d.known.is_none() || verify));
+        r.sumo_speed_mps.push(p.sumo_speed);
+        Ok(())
+    }
+}
+
+/// The arc length of vehicle `d`'s front at `front`, its new place after
+/// about `advance` metres (the look-up starts from the old one's segment).
+fn front_arc_after(
+    fleet: &Fleet,
+    slot: usize,
+    d: &mut Driven,
+    front: Point2<f64>,
+    advance: f64,
+) -> Result<f64, TrafficError> {
+    let path = &fleet.track(fleet.vehicle_track(slot as i64)? as i64)?.path;
+    let (s, seg) = path.arc_near_from(&front, d.s_front_m + advance, d.seg_front);
+    d.seg_front = seg;
+    Ok(s)
+}
+
+/// Stage 4: the front passed, over the step, the stop line ahead while its
+/// light is red (from arc length `d.s_front_m` to `s_new`).
+fn crossed_red(signals: &[Vec<Signal>], d: &Driven, s_new: f64) -> bool {
+    d.route.stops.get(d.next_stop).is_some_and(|stop| {
+        stop.signal.is_some()
+            && d.s_front_m < stop.s_m
+            && stop.s_m <= s_new
+            && signal_at(signals, stop) == Signal::Stop
+    })
+}
