@@ -9,7 +9,7 @@
 //! types, so unknown keys are `ConfigError`s that name them.
 
 use crate::errors::{config_error, ConfigError as PyConfigError};
-use blendtrack::config::{Config as CoreConfig, ControllerConfig as Core, LateralKind};
+use blendtrack::config::{AlphaMode, Config as CoreConfig, ControllerConfig as Core, LateralKind};
 use blendtrack::vehicle::{Direction, VehicleParams as CoreVehicle};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
@@ -131,6 +131,14 @@ pub struct ControllerConfig {
     pub use_path_widths: bool,
     pub border_margin_m: f64,
     pub ray_horizon_m: f64,
+    pub alpha_mode: String,
+    pub auto_alpha_forward: f64,
+    pub auto_alpha_backward: f64,
+    pub auto_alpha_curve_gain: f64,
+    pub auto_alpha_curvature_change_gain: f64,
+    pub auto_alpha_preview_s: f64,
+    pub auto_alpha_large_error_m: f64,
+    pub auto_alpha_error_gain: f64,
 }
 
 fn direction_name(d: Direction) -> &'static str {
@@ -175,6 +183,18 @@ impl From<&Core> for ControllerConfig {
             use_path_widths: c.use_path_widths,
             border_margin_m: c.border_margin_m,
             ray_horizon_m: c.ray_horizon_m,
+            alpha_mode: match c.alpha_mode {
+                AlphaMode::Fixed => "fixed",
+                AlphaMode::Auto => "auto",
+            }
+            .to_string(),
+            auto_alpha_forward: c.auto_alpha_forward,
+            auto_alpha_backward: c.auto_alpha_backward,
+            auto_alpha_curve_gain: c.auto_alpha_curve_gain,
+            auto_alpha_curvature_change_gain: c.auto_alpha_curvature_change_gain,
+            auto_alpha_preview_s: c.auto_alpha_preview_s,
+            auto_alpha_large_error_m: c.auto_alpha_large_error_m,
+            auto_alpha_error_gain: c.auto_alpha_error_gain,
         }
     }
 }
@@ -198,6 +218,15 @@ impl ControllerConfig {
             other => {
                 return Err(PyConfigError::new_err(format!(
                     "config key `lateral_controller` = {other:?}: must be \"blend\", \"stanley\" or \"pure_pursuit\""
+                )))
+            }
+        };
+        let alpha_mode = match self.alpha_mode.as_str() {
+            "fixed" => AlphaMode::Fixed,
+            "auto" => AlphaMode::Auto,
+            other => {
+                return Err(PyConfigError::new_err(format!(
+                    "config key `alpha_mode` = {other:?}: must be \"fixed\" or \"auto\""
                 )))
             }
         };
@@ -226,6 +255,14 @@ impl ControllerConfig {
             use_path_widths: self.use_path_widths,
             border_margin_m: self.border_margin_m,
             ray_horizon_m: self.ray_horizon_m,
+            alpha_mode,
+            auto_alpha_forward: self.auto_alpha_forward,
+            auto_alpha_backward: self.auto_alpha_backward,
+            auto_alpha_curve_gain: self.auto_alpha_curve_gain,
+            auto_alpha_curvature_change_gain: self.auto_alpha_curvature_change_gain,
+            auto_alpha_preview_s: self.auto_alpha_preview_s,
+            auto_alpha_large_error_m: self.auto_alpha_large_error_m,
+            auto_alpha_error_gain: self.auto_alpha_error_gain,
         };
         c.validate().map_err(config_error)?;
         Ok(c)
