@@ -102,6 +102,8 @@ def test_paper_report(tmp_path: Path) -> None:
         if line.startswith("![]("):
             assert (out / line[4:-1]).is_file(), line
     assert "Where our numbers differ" in report
+    for claim in ("Verdict on C1", "Verdict on C2", "Verdict on C3"):
+        assert claim in report
 
 
 @pytest.mark.parametrize(
