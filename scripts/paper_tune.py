@@ -19,8 +19,9 @@ Run from the repository root (a few minutes):
    rear law) and 0.5 on body_error_mean_m, forward and backward, on the
    held-out tracks, with the paper's parameters.
 
-Writes configs/paper_tuned.json (read by `blendtrack paper`) and
-docs/auto_alpha_held_out.png.
+Writes configs/paper_tuned.json (read by `blendtrack paper`),
+docs/auto_alpha_held_out.png and docs/auto_alpha_history.png (alpha(t) on
+the Nuerburgring; `--history-only` writes just that figure, in seconds).
 """
 
 from __future__ import annotations
@@ -127,7 +128,37 @@ def plot_auto(comp: dict[str, Any], file: Any) -> None:
     plt.close(fig)
 
 
+def plot_history(file: Any) -> None:
+    """alpha(t), |curvature| at the control point and both axles' errors: auto alpha on the Nuerburgring, forward, paper parameters."""
+    p = pe.track("Nuerburgring", VEHICLE)
+    frame, _ = pe.run(p, pe.ControllerConfig(), VEHICLE, pe.FORWARD, 0, alpha="auto")
+    st, _ = pe.run(p, pe.ControllerConfig(lateral_controller="stanley"), VEHICLE, pe.FORWARD, 0)
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    window = frame["t_s"] < 80.0
+    axes[0].plot(frame["t_s"][window], frame["alpha"][window], lw=0.8)
+    axes[0].set_ylabel("auto alpha")
+    axes[1].plot(frame["t_s"][window], frame["curvature_per_m"][window].abs(), lw=0.8, color="C2")
+    axes[1].set_ylabel("|curvature| (1/m)")
+    for df, label, ls in ((frame, "auto", "-"), (st, "Stanley", ":")):
+        w = df["t_s"] < 80.0
+        axes[2].plot(df["t_s"][w], df["lateral_error_front_m"][w], ls, lw=0.8, color="C0", label=f"{label}, front axle")
+        axes[2].plot(df["t_s"][w], df["lateral_error_rear_m"][w], ls, lw=0.8, color="C3", label=f"{label}, rear axle")
+    axes[2].set_ylim(-0.4, 0.4)
+    axes[2].set_ylabel("lateral error (m)")
+    axes[2].set_xlabel("t (s)")
+    axes[2].legend(fontsize=7, ncol=2)
+    for ax in axes:
+        ax.grid(alpha=0.3)
+    axes[0].set_title("Automatic alpha, scaled Nuerburgring, 8 m/s, noise + delay (first 80 s; start 4 m off)")
+    fig.tight_layout()
+    fig.savefig(file, dpi=110)
+    plt.close(fig)
+
+
 def main() -> int:
+    plot_history(pe.REPO_ROOT / "docs" / "auto_alpha_history.png")
+    if "--history-only" in sys.argv[1:]:
+        return 0
     t0 = time.time()
     training = {n: pe.track(n, VEHICLE) for n in pe.TRAINING}
     held = {n: pe.track(n, VEHICLE) for n in pe.held_out_tracks()}
