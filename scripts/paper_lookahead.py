@@ -80,7 +80,9 @@ def clothoid_study() -> dict[str, object]:
             at = int(np.searchsorted(s, CLOTHOID_M - lookahead))
             rows.append({"d_m": d, "L_m": lookahead, "sim_m": float(e[at]), "closed_form_m": c * lookahead * d * d / 4})
             if lookahead == 16.0 or d == 8.0:
-                ax.plot(s, e, lw=1, label=f"d = {d:g} m, L = {lookahead:g} m")
+                # Stop short of the open path's end, where the look-ahead runs off it.
+                keep = s < CLOTHOID_M + ARC_M - 40.0
+                ax.plot(s[keep], e[keep], lw=1, label=f"d = {d:g} m, L = {lookahead:g} m")
     ax.axvspan(0, CLOTHOID_M, color="0.9")
     ax.set_xlabel("arc length from the clothoid's start (m)")
     ax.set_ylabel("rear axle error (m, > 0 inside)")
