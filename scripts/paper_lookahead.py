@@ -28,6 +28,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import blendtrack  # noqa: E402
+from blendtrack import paper_eval as pe  # noqa: E402
 from blendtrack.paper import choose_scale, tightest_radius_m  # noqa: E402
 
 ROOT = FsPath(__file__).resolve().parents[1]
@@ -39,21 +40,8 @@ STRAIGHT_M, CLOTHOID_M, RADIUS_M, ARC_M = 100.0, 150.0, 40.0, 150.0
 
 
 def clothoid_entry() -> tuple[blendtrack.Path, float]:
-    """Straight, clothoid from 0 to 1/R over CLOTHOID_M, arc; points every 0.25 m."""
-    c = 1.0 / (RADIUS_M * CLOTHOID_M)
-    ds = 0.25
-    n = int((STRAIGHT_M + CLOTHOID_M + ARC_M) / ds)
-    x = y = th = 0.0
-    pts = [(x, y)]
-    for i in range(n):
-        sm = (i + 0.5) * ds - STRAIGHT_M
-        kappa = 0.0 if sm < 0 else (c * sm if sm < CLOTHOID_M else 1.0 / RADIUS_M)
-        th_mid = th + 0.5 * kappa * ds
-        x += ds * math.cos(th_mid)
-        y += ds * math.sin(th_mid)
-        th += kappa * ds
-        pts.append((x, y))
-    return blendtrack.Path(np.array(pts)), c
+    """Straight, clothoid from 0 to 1/R over CLOTHOID_M, arc (blendtrack.paper_eval.clothoid_entry)."""
+    return pe.clothoid_entry(STRAIGHT_M, CLOTHOID_M, RADIUS_M, ARC_M)
 
 
 def rear_law(d: float, lookahead: float, **kw: object) -> blendtrack.ControllerConfig:

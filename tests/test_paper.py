@@ -40,3 +40,16 @@ def test_parameter_sets() -> None:
     assert pe.fair_config("pure pursuit", tuned).pure_pursuit_gain_s == 0.5
     assert pe.fair_config("pure pursuit", tuned).stanley_gain == 1.0  # not its own: the default
     assert "Nuerburgring" not in pe.held_out_tracks() and "test_track" not in pe.held_out_tracks()
+
+
+def test_clothoid_closed_form_against_simulation() -> None:
+    # The rear law's steady error on a clothoid entry, c (L - 2 v tau) d^2 / 4
+    # (docs/paper.md), against the closed-loop simulation: within 5 %.
+    for d, lookahead, tau in ((8.0, 16.0, 0.0), (4.0, 24.0, 0.0), (8.0, 16.0, 0.1)):
+        sim, closed = pe.clothoid_plateau_m(d, lookahead, 8.0, tau)
+        assert sim == pytest.approx(closed, rel=0.05), (d, lookahead, tau)
+    # Without the look-ahead error there would be nothing: the closed form is
+    # proportional to L d^2 (doubling d quadruples it, in simulation too).
+    a, _ = pe.clothoid_plateau_m(4.0, 16.0, 8.0)
+    b, _ = pe.clothoid_plateau_m(8.0, 16.0, 8.0)
+    assert b / a == pytest.approx(4.0, rel=0.05)

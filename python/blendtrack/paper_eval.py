@@ -39,6 +39,46 @@ NOISE = "uniform:0.05:0.5"
 DELAY_S = 0.1
 
 
+def clothoid_entry(straight_m: float = 100.0, clothoid_m: float = 150.0, radius_m: float = 40.0, arc_m: float = 150.0) -> tuple[Path, float]:
+    """An open test path: a straight, a clothoid whose curvature grows
+    linearly from 0 to 1/R over ``clothoid_m``, and an arc; points every
+    0.25 m. Returns the path and the clothoid's curvature rate c (1/m^2)."""
+    c = 1.0 / (radius_m * clothoid_m)
+    ds = 0.25
+    n = int((straight_m + clothoid_m + arc_m) / ds)
+    x = y = th = 0.0
+    pts = [(x, y)]
+    for i in range(n):
+        sm = (i + 0.5) * ds - straight_m
+        kappa = 0.0 if sm < 0 else (c * sm if sm < clothoid_m else 1.0 / radius_m)
+        th_mid = th + 0.5 * kappa * ds
+        x += ds * math.cos(th_mid)
+        y += ds * math.sin(th_mid)
+        th += kappa * ds
+        pts.append((x, y))
+    return Path(np.array(pts)), c
+
+
+def clothoid_plateau_m(d_m: float, lookahead_m: float, speed_mps: float, delay_s: float = 0.0) -> tuple[float, float]:
+    """The rear law alone (alpha 0, d and L fixed) at a fixed speed through
+    :func:`clothoid_entry`: the rear axle's simulated error at the end of the
+    clothoid's plateau (arc length ``clothoid_m - L`` into it) and the closed
+    form ``c (L - 2 v tau) d^2 / 4`` (docs/paper.md)."""
+    straight_m, clothoid_m = 100.0, 150.0
+    path, c = clothoid_entry(straight_m, clothoid_m)
+    cfg = ControllerConfig(
+        lat_blend_factor=0.0,
+        target_distance_min_m=d_m,
+        target_distance_gain_s=0.0,
+        curvature_lookahead_gain_s=lookahead_m / speed_mps,
+        preferred_speed=speed_mps,
+    )
+    frame, _ = simulate(path, cfg, fixed_speed_mps=speed_mps, duration_s=(path.length_m - 5.0) / speed_mps, delay_s=delay_s)
+    s = frame["s_m"].to_numpy() - straight_m
+    at = int(np.searchsorted(s, clothoid_m - lookahead_m))
+    return float(frame["lateral_error_rear_m"].to_numpy()[at]), c * (lookahead_m - 2.0 * speed_mps * delay_s) * d_m * d_m / 4.0
+
+
 def held_out_tracks() -> list[str]:
     """Names of the track files in ../shared/tracks other than the training ones."""
     return sorted(p.stem for p in SHARED_TRACKS.glob("*.csv") if p.stem not in TRAINING)
