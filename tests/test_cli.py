@@ -17,7 +17,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 TRACKS = REPO_ROOT.parent / "shared" / "tracks"
 NUERBURGRING = TRACKS / "Nuerburgring.csv"
 needs_nuerburgring = pytest.mark.skipif(not NUERBURGRING.is_file(), reason=f"{NUERBURGRING} is absent (shared/ track data not beside the repo)")
-PLOTS = ["trajectory.png", "lateral_error.png", "heading_error.png", "steering.png", "speed.png"]
+PLOTS = ["trajectory.png", "lateral_error.png", "heading_error.png", "steering.png", "speed.png", "alpha.png"]
 
 
 def _cli(*args: str, timeout: float = 300) -> subprocess.CompletedProcess[str]:
@@ -30,14 +30,16 @@ def _check_outputs(out: Path) -> dict[str, float]:
     assert list(metrics) == list(METRIC_KEYS)
     assert set(metrics) == {
         "lateral_error_mean_abs_m", "lateral_error_rms_m", "lateral_error_max_abs_m", "heading_error_rms_deg",
-        "steering_rate_rms_deg_s", "steering_rate_max_deg_s", "lateral_accel_max_mps2", "settling_time_s",
-        "overshoot_m", "mean_speed_mps", "distance_m", "lateral_error_mean_abs_m_settled",
-        "lateral_error_rms_m_settled", "lateral_error_max_abs_m_settled", "heading_error_rms_deg_settled",
+        "steering_rate_rms_deg_s", "steering_rate_max_deg_s", "lateral_accel_max_mps2", "reached_time_s",
+        "settling_time_s", "initial_overshoot_m", "mean_speed_mps", "distance_m", "lateral_error_mean_abs_m_reached",
+        "lateral_error_mean_abs_m_settled", "lateral_error_rms_m_settled", "lateral_error_max_abs_m_settled",
+        "heading_error_rms_deg_settled", "lateral_error_front_axle_mean_abs_m", "lateral_error_rear_axle_mean_abs_m",
+        "body_error_mean_m", "body_error_max_m",
     }  # fmt: skip
     for key, value in metrics.items():
         assert isinstance(value, float) and math.isfinite(value), (key, value)
     header = (out / "timeseries.csv").read_text().splitlines()[0].split(",")
-    assert {"t_s", "x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "alpha", "s_m", "lateral_error_m", "heading_error_rad", "accel_mps2", "virtual_obstacle_m"} <= set(header)
+    assert {"t_s", "x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "alpha", "s_m", "lateral_error_m", "lateral_error_front_m", "lateral_error_rear_m", "heading_error_rad", "accel_mps2", "virtual_obstacle_m"} <= set(header)
     for name in PLOTS:
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
     return metrics
@@ -73,6 +75,23 @@ def test_sim_backward_stanley_on_a_circle_with_a_config_file(tmp_path: Path) -> 
     assert abs(float(rows[-1]["lateral_error_m"])) < 0.1
 
 
+def test_sim_with_automatic_alpha(tmp_path: Path) -> None:
+    out = tmp_path / "auto"
+    r = _cli("sim", "--track", "test_track", "--alpha", "auto", "--speed", "8", "--duration", "60", "--offset", "2", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    m = _check_outputs(out)
+    assert "body error" in r.stdout
+    # The body error is the mean of the larger axle error: between the two axles' means and their sum.
+    front, rear = m["lateral_error_front_axle_mean_abs_m"], m["lateral_error_rear_axle_mean_abs_m"]
+    assert max(front, rear) <= m["body_error_mean_m"] <= front + rear
+    import pandas as pd
+
+    alpha = pd.read_csv(out / "timeseries.csv")["alpha"]
+    assert alpha.between(0.0, 1.0).all() and alpha.nunique() > 10  # it moves
+    bad = _cli("sim", "--track", "test_track", "--alpha", "sometimes", "--out", str(tmp_path / "x"))
+    assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and "alpha" in bad.stderr
+
+
 @needs_nuerburgring
 def test_sim_on_the_nuerburgring(tmp_path: Path) -> None:
     out = tmp_path / "n"
@@ -94,6 +113,8 @@ def test_paper_report(tmp_path: Path) -> None:
         if line.startswith("![]("):
             assert (out / line[4:-1]).is_file(), line
     assert "Where our numbers differ" in report
+    for claim in ("Verdict on C1", "Verdict on C2", "Verdict on C3"):
+        assert claim in report
 
 
 @pytest.mark.parametrize(

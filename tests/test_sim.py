@@ -42,7 +42,7 @@ def test_compute_metrics_on_a_hand_made_trace() -> None:
     zeros = np.zeros(n)
     v = np.full(n, 2.0)
     m = blendtrack.compute_metrics(t, e, zeros, zeros, v, np.cumsum(v * 0.1))
-    assert m["overshoot_m"] == pytest.approx(0.3)
+    assert m["initial_overshoot_m"] == pytest.approx(0.3)
     assert m["settling_time_s"] == pytest.approx(0.6)
     assert m["lateral_error_mean_abs_m_settled"] == pytest.approx((0.05 + 0.02 + 0.01) / 3)
     assert m["lateral_error_max_abs_m"] == pytest.approx(1.0)
@@ -50,6 +50,74 @@ def test_compute_metrics_on_a_hand_made_trace() -> None:
     assert m["distance_m"] == pytest.approx(1.6)
     with pytest.raises(blendtrack.InputError, match="v_mps"):
         blendtrack.compute_metrics(t, e, zeros, zeros, v[:-1], np.cumsum(v * 0.1))
+    # Without axle columns the axle metrics are undefined, not zero.
+    assert math.isnan(m["body_error_mean_m"])
+
+
+def test_initial_overshoot_and_axle_metrics_by_hand() -> None:
+    # Starts 2 m right, crosses at sample 2, peaks at +0.4, crosses back at
+    # sample 4; the later +0.9 (a corner, say) is not the initial overshoot.
+    e = np.array([-2.0, -0.5, 0.2, 0.4, -0.1, 0.0, 0.9, 0.0])
+    n = len(e)
+    t = np.arange(1, n + 1) * 0.1
+    z = np.zeros(n)
+    front = np.array([0.1, -0.2, 0.0, 0.3, 0.0, 0.0, 0.0, 0.0])
+    rear = np.array([-0.3, 0.1, 0.0, -0.1, 0.2, 0.0, 0.0, 0.0])
+    m = blendtrack.compute_metrics(t, e, z, z, z, z, lateral_error_front_m=front, lateral_error_rear_m=rear)
+    assert m["initial_overshoot_m"] == pytest.approx(0.4)
+    assert m["opposite_side_max_m"] == pytest.approx(0.9)
+    assert m["lateral_error_front_axle_mean_abs_m"] == pytest.approx(0.6 / n)
+    assert m["lateral_error_rear_axle_mean_abs_m"] == pytest.approx(0.7 / n)
+    assert m["body_error_mean_m"] == pytest.approx((0.3 + 0.2 + 0.3 + 0.2) / n)
+    assert m["body_error_max_m"] == pytest.approx(0.3)
+    # First below 0.1 m at sample 5 (t = 0.6 s; exactly 0.1 m at sample 4 is
+    # not below), even though it leaves again at sample 6.
+    assert m["reached_time_s"] == pytest.approx(0.6)
+    assert m["lateral_error_mean_abs_m_reached"] == pytest.approx((0.0 + 0.9 + 0.0) / 3)
+    with pytest.raises(blendtrack.InputError, match="lateral_error_front_m"):
+        blendtrack.compute_metrics(t, e, z, z, z, z, lateral_error_front_m=front[:-1], lateral_error_rear_m=rear)
+
+
+def test_axle_columns_are_the_true_axles(loop: blendtrack.Path) -> None:
+    # Independent check: project the recorded rear axle and the front axle
+    # (rear + E (cos, sin)) onto the path from Python.
+    frame, m = blendtrack.simulate(loop, offset_m=1.0, duration_s=20.0, noise="uniform:0.05:0.5", seed=4)
+    for i in (0, 500, 1999):
+        row = frame.iloc[i]
+        rear = loop.project(row.x_m, row.y_m)
+        front = loop.project(row.x_m + 2.6 * math.cos(row.theta_rad), row.y_m + 2.6 * math.sin(row.theta_rad))
+        assert row.lateral_error_rear_m == pytest.approx(rear["lateral_m"], abs=1e-9)
+        assert row.lateral_error_front_m == pytest.approx(front["lateral_m"], abs=1e-9)
+    body = np.maximum(frame.lateral_error_front_m.abs(), frame.lateral_error_rear_m.abs())
+    assert m["body_error_mean_m"] == pytest.approx(body.mean(), rel=1e-12)
+
+
+@pytest.mark.parametrize("direction", ["forward", "backward"])
+def test_auto_alpha_limits_in_closed_loop(direction: str) -> None:
+    # On a straight line, on the path, no noise: the leading axle's law
+    # (1 forward, 0 backward) at every step.
+    cfg = blendtrack.ControllerConfig(direction=direction, auto_alpha_forward=0.3, auto_alpha_backward=0.6)
+    lead = 1.0 if direction == "forward" else 0.0
+    frame, _ = blendtrack.simulate(blendtrack.Path.straight(200.0), cfg, alpha="auto", duration_s=20.0, fixed_speed_mps=3.0)
+    assert (frame["alpha"] == lead).all()
+    # In a steady curve (c = min(1, 10 E / R) = 1 for R = 20 m; no forcing
+    # on a circle) with the large-error term switched off: the base.
+    base = 0.3 if direction == "forward" else 0.6
+    frame, _ = blendtrack.simulate(
+        blendtrack.Path.circle(20.0), cfg.replace(auto_alpha_large_error_m=1e6), alpha="auto", duration_s=20.0, fixed_speed_mps=3.0
+    )
+    np.testing.assert_allclose(frame["alpha"], base, atol=1e-5)
+    # Far from the path: the leading law again (w_e = 1 from 0.5 m on).
+    frame, _ = blendtrack.simulate(blendtrack.Path.circle(20.0), cfg, alpha="auto", duration_s=0.05, fixed_speed_mps=3.0, offset_m=3.0)
+    assert frame["alpha"].iloc[0] == lead
+    with pytest.raises(blendtrack.ConfigError, match="alpha_mode"):
+        blendtrack.simulate(blendtrack.Path.straight(50.0), cfg.replace(alpha_mode="auto"), alpha=0.5, duration_s=1.0)
+    with pytest.raises(blendtrack.ConfigError, match="auto_alpha_large_error_m"):
+        cfg.replace(auto_alpha_large_error_m=0.0)
+    with pytest.raises(blendtrack.ConfigError, match="auto_alpha_forward"):
+        cfg.replace(auto_alpha_forward=1.5)
+    with pytest.raises(blendtrack.ConfigError, match="alpha_mode"):
+        cfg.replace(alpha_mode="sometimes")
 
 
 def test_never_settling_run_has_nan_settled_metrics() -> None:

@@ -111,6 +111,14 @@ class ControllerConfig:
     use_path_widths: bool
     border_margin_m: float
     ray_horizon_m: float
+    alpha_mode: str
+    auto_alpha_forward: float
+    auto_alpha_backward: float
+    auto_alpha_curve_gain: float
+    auto_alpha_curvature_change_gain: float
+    auto_alpha_preview_s: float
+    auto_alpha_large_error_m: float
+    auto_alpha_error_gain: float
     def __new__(cls, **kwargs: Any) -> ControllerConfig: ...
     def replace(self, **kwargs: Any) -> ControllerConfig: ...
     def validate(self) -> None: ...
@@ -176,6 +184,8 @@ def compute_metrics(
     v_mps: _F64,
     distance_m: _F64,
     wheelbase_m: float = 2.6,
+    lateral_error_front_m: _F64 | None = None,
+    lateral_error_rear_m: _F64 | None = None,
 ) -> dict[str, float]: ...
 
 @final

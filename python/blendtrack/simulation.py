@@ -33,7 +33,12 @@ from blendtrack._blendtrack import simulate as _native_simulate
 #: ``straight[:LENGTH]`` and ``circle:RADIUS``).
 BUILTIN_TRACKS = ("test_track",)
 
-#: The 15 keys of ``metrics.json``, in order.
+#: The keys of ``metrics.json``, in order (see rust/blendtrack/src/metrics.rs
+#: for the definitions): whole-run errors of the control point, the initial
+#: transient (first time within 0.1 m, settled for good, initial overshoot),
+#: the control point's mean |e| after first reaching 0.1 m and after settling,
+#: and the true front and rear axles' errors with the body error
+#: (mean over the run of max(|e_front|, |e_rear|)).
 METRIC_KEYS = (
     "lateral_error_mean_abs_m",
     "lateral_error_rms_m",
@@ -42,27 +47,31 @@ METRIC_KEYS = (
     "steering_rate_rms_deg_s",
     "steering_rate_max_deg_s",
     "lateral_accel_max_mps2",
+    "reached_time_s",
     "settling_time_s",
-    "overshoot_m",
+    "initial_overshoot_m",
     "mean_speed_mps",
     "distance_m",
+    "lateral_error_mean_abs_m_reached",
     "lateral_error_mean_abs_m_settled",
     "lateral_error_rms_m_settled",
     "lateral_error_max_abs_m_settled",
     "heading_error_rms_deg_settled",
+    "lateral_error_front_axle_mean_abs_m",
+    "lateral_error_rear_axle_mean_abs_m",
+    "body_error_mean_m",
+    "body_error_max_m",
 )
 
 #: Further keys of :func:`simulate`'s metrics dict (not in ``metrics.json``):
-#: the window from the first time |e| < 0.1 m on, even if it leaves again
-#: (see rust/blendtrack/src/metrics.rs).
+#: the largest excursion to the side opposite the start anywhere in the run,
+#: and the rest of the window from the first time |e| < 0.1 m on.
 EXTRA_METRIC_KEYS = (
-    "reached_time_s",
-    "lateral_error_mean_abs_m_reached",
+    "opposite_side_max_m",
     "lateral_error_rms_m_reached",
     "lateral_error_max_abs_m_reached",
     "heading_error_rms_deg_reached",
 )
-
 
 
 def file_problem(name: str | os.PathLike[str]) -> str | None:
@@ -158,7 +167,7 @@ AlphaSpec = float | str | Callable[[float], float] | None
 
 
 def _alpha_kwargs(alpha: AlphaSpec, dt_s: float, duration_s: float) -> dict[str, Any]:
-    if alpha is None:
+    if alpha is None or alpha == "auto":
         return {}
     if isinstance(alpha, str):
         kind, _, arg = alpha.partition(":")
@@ -167,7 +176,7 @@ def _alpha_kwargs(alpha: AlphaSpec, dt_s: float, duration_s: float) -> dict[str,
         try:
             return {"alpha": float(alpha)}
         except ValueError:
-            raise ConfigError(f"bad alpha {alpha!r} (expected a number in [0, 1] or sine:OMEGA)") from None
+            raise ConfigError(f"bad alpha {alpha!r} (expected a number in [0, 1] , sine:OMEGA or auto)") from None
     if callable(alpha):
         # Sampled on the time grid once, then run as a piecewise schedule in
         # Rust: exact at every step time, no Python call per step.
@@ -206,15 +215,22 @@ def simulate(
 ) -> tuple[pd.DataFrame, dict[str, float]]:
     """Runs one closed-loop simulation in Rust.
 
-    ``alpha``: None (the config's ``lat_blend_factor``), a number, ``"sine:OMEGA"``
-    (the paper's moving point ``0.5 (sin(OMEGA t) + 1)``) or a callable of
-    time. Returns the time series (one row per step: t_s, x_m, y_m,
-    theta_rad, v_mps, delta_rad, alpha, s_m, lateral_error_m,
-    heading_error_rad, accel_mps2, virtual_obstacle_m, curvature_per_m,
+    ``alpha``: None (the config's ``lat_blend_factor``, or its automatic alpha
+    when ``alpha_mode = "auto"``), a number, ``"sine:OMEGA"`` (the paper's
+    moving point ``0.5 (sin(OMEGA t) + 1)``), ``"auto"`` (the automatic alpha:
+    the config with ``alpha_mode = "auto"``) or a callable of time. A fixed
+    alpha given here with a config in auto mode is an error. Returns the time
+    series (one row per step: t_s, x_m, y_m, theta_rad, v_mps, delta_rad,
+    alpha (the one used), s_m, lateral_error_m, lateral_error_front_m,
+    lateral_error_rear_m (the true axles), heading_error_rad, accel_mps2, virtual_obstacle_m, curvature_per_m,
     distance_m) and the metrics (:data:`METRIC_KEYS` then
     :data:`EXTRA_METRIC_KEYS`; NaN where undefined, i.e. the after-settling
     values of a run that never settles).
     """
+    if alpha == "auto":
+        config = (config or ControllerConfig()).replace(alpha_mode="auto")
+    elif alpha is not None and config is not None and config.alpha_mode == "auto":
+        raise ConfigError(f"alpha {alpha!r} given with a config whose alpha_mode is \"auto\" (pass alpha=None or \"auto\")")
     columns, metrics = _native_simulate(
         path,
         config,

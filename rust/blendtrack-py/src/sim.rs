@@ -14,7 +14,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use std::sync::Arc;
 
-/// The 15 `metrics.json` metrics, then the extra ones, as a dict (NaN where undefined).
+/// The `metrics.json` metrics, then the extra ones, as a dict (NaN where undefined).
 pub(crate) fn metrics_dict<'py>(
     py: Python<'py>,
     m: &blendtrack::RunMetrics,
@@ -135,6 +135,8 @@ pub(crate) fn simulate<'py>(
         ("alpha", t.alpha),
         ("s_m", t.s_m),
         ("lateral_error_m", t.lateral_error_m),
+        ("lateral_error_front_m", t.lateral_error_front_m),
+        ("lateral_error_rear_m", t.lateral_error_rear_m),
         ("heading_error_rad", t.heading_error_rad),
         ("accel_mps2", t.accel_mps2),
         ("virtual_obstacle_m", t.virtual_obstacle_m),
@@ -146,9 +148,10 @@ pub(crate) fn simulate<'py>(
     Ok((cols, metrics_dict(py, &metrics)?))
 }
 
-/// Metrics of hand-made or recorded columns (same definitions as `simulate`).
+/// Metrics of hand-made or recorded columns (same definitions as `simulate`);
+/// the axle metrics need both `lateral_error_front_m` and `lateral_error_rear_m` (NaN otherwise).
 #[pyfunction]
-#[pyo3(signature = (t_s, lateral_error_m, heading_error_rad, delta_rad, v_mps, distance_m, wheelbase_m = 2.6))]
+#[pyo3(signature = (t_s, lateral_error_m, heading_error_rad, delta_rad, v_mps, distance_m, wheelbase_m = 2.6, lateral_error_front_m = None, lateral_error_rear_m = None))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn compute_metrics<'py>(
     py: Python<'py>,
@@ -159,12 +162,27 @@ pub(crate) fn compute_metrics<'py>(
     v_mps: PyReadonlyArray1<'py, f64>,
     distance_m: PyReadonlyArray1<'py, f64>,
     wheelbase_m: f64,
+    lateral_error_front_m: Option<PyReadonlyArray1<'py, f64>>,
+    lateral_error_rear_m: Option<PyReadonlyArray1<'py, f64>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let n = t_s.len();
     if n == 0 {
         return Err(input_error(
             "argument `t_s` is empty: metrics of no samples are undefined",
         ));
+    }
+    for (name, c) in [
+        ("lateral_error_front_m", &lateral_error_front_m),
+        ("lateral_error_rear_m", &lateral_error_rear_m),
+    ] {
+        if let Some(c) = c {
+            if c.len() != n {
+                return Err(input_error(format!(
+                    "argument `{name}` has {} entries, expected {n} (as `t_s`)",
+                    c.len()
+                )));
+            }
+        }
     }
     let cols = [
         ("lateral_error_m", &lateral_error_m),
@@ -195,9 +213,13 @@ pub(crate) fn compute_metrics<'py>(
         v(&v_mps),
         v(&distance_m),
     );
+    let opt = |a: &Option<PyReadonlyArray1<'py, f64>>| a.as_ref().map(v).unwrap_or_default();
+    let (front, rear) = (opt(&lateral_error_front_m), opt(&lateral_error_rear_m));
     let series = Series {
         t_s: &t,
         lateral_error_m: &e,
+        lateral_error_front_m: &front,
+        lateral_error_rear_m: &rear,
         heading_error_rad: &h,
         delta_rad: &d,
         v_mps: &s,

@@ -24,6 +24,20 @@ pub enum LateralKind {
     PurePursuit,
 }
 
+/// How the blend factor alpha is chosen each step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum AlphaMode {
+    /// `lat_blend_factor`, or the alpha the caller passes (a run's schedule,
+    /// a per-vehicle value).
+    #[default]
+    Fixed,
+    /// [`crate::lateral::auto_alpha`] every step, from the direction of travel,
+    /// speed, curvature ahead and the axle errors (the `auto_alpha_*` keys);
+    /// any alpha passed by the caller is ignored.
+    Auto,
+}
+
 /// Parameters of the lateral and longitudinal controllers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -81,6 +95,30 @@ pub struct ControllerConfig {
     pub border_margin_m: f64,
     /// How far along the path (m) the ray cast looks for border crossings.
     pub ray_horizon_m: f64,
+
+    // ---- Automatic alpha (beyond the paper; see `lateral::auto_alpha`) ----
+    /// "fixed" (default) or "auto".
+    pub alpha_mode: AlphaMode,
+    /// Auto alpha in a steady curve (constant curvature, small errors),
+    /// forward and backward (in [0, 1]). On a straight, far from the path and
+    /// where the curvature changes, auto alpha goes to the leading axle's law
+    /// instead (1 forward, 0 backward).
+    pub auto_alpha_forward: f64,
+    pub auto_alpha_backward: f64,
+    /// How much of a curve there is to balance: `min(1, gain E |kappa|)`
+    /// (>= 0, dimensionless; `kappa` = the largest curvature over the preview).
+    pub auto_alpha_curve_gain: f64,
+    /// Weight (>= 0, dimensionless) of the rear law's predicted error where
+    /// the curvature changes ahead, `d^2 |forcing| / 2` in wheelbases.
+    pub auto_alpha_curvature_change_gain: f64,
+    /// Preview time (s, > 0): the curvature ahead is read over
+    /// `max(E, auto_alpha_preview_s * |v|)` metres.
+    pub auto_alpha_preview_s: f64,
+    /// Axle error (m, > 0) from which the leading axle's law takes over fully.
+    pub auto_alpha_large_error_m: f64,
+    /// Weight (1/m, >= 0) of the axle-error balance: alpha moves toward the
+    /// axle with the larger |lateral error| by `gain (|e_front| - |e_rear|)`.
+    pub auto_alpha_error_gain: f64,
 }
 
 impl Default for ControllerConfig {
@@ -110,6 +148,16 @@ impl Default for ControllerConfig {
             use_path_widths: true,
             border_margin_m: 0.0,
             ray_horizon_m: 200.0,
+            alpha_mode: AlphaMode::Fixed,
+            // Tuned on the training tracks only (test_track, Nuerburgring;
+            // docs/paper.md, "Automatic alpha").
+            auto_alpha_forward: 0.3,
+            auto_alpha_backward: 0.8,
+            auto_alpha_curve_gain: 10.0,
+            auto_alpha_curvature_change_gain: 1.0,
+            auto_alpha_preview_s: 0.5,
+            auto_alpha_large_error_m: 2.0,
+            auto_alpha_error_gain: 0.0,
         }
     }
 }
@@ -135,6 +183,14 @@ fn non_negative(key: &str, v: f64) -> Result<(), ConfigError> {
         Ok(())
     } else {
         Err(ConfigError::invalid(key, v, "must be >= 0"))
+    }
+}
+fn unit_interval(key: &str, v: f64) -> Result<(), ConfigError> {
+    finite(key, v)?;
+    if (0.0..=1.0).contains(&v) {
+        Ok(())
+    } else {
+        Err(ConfigError::invalid(key, v, "must be in [0, 1]"))
     }
 }
 fn negative(key: &str, v: f64) -> Result<(), ConfigError> {
@@ -194,6 +250,16 @@ impl ControllerConfig {
         )?;
         finite("border_margin_m", self.border_margin_m)?;
         positive("ray_horizon_m", self.ray_horizon_m)?;
+        unit_interval("auto_alpha_forward", self.auto_alpha_forward)?;
+        unit_interval("auto_alpha_backward", self.auto_alpha_backward)?;
+        non_negative("auto_alpha_curve_gain", self.auto_alpha_curve_gain)?;
+        non_negative(
+            "auto_alpha_curvature_change_gain",
+            self.auto_alpha_curvature_change_gain,
+        )?;
+        positive("auto_alpha_preview_s", self.auto_alpha_preview_s)?;
+        positive("auto_alpha_large_error_m", self.auto_alpha_large_error_m)?;
+        non_negative("auto_alpha_error_gain", self.auto_alpha_error_gain)?;
         Ok(())
     }
 }
@@ -392,6 +458,24 @@ mod tests {
         assert!(e.to_string().contains("controller.max_deceleration"), "{e}");
         let e = Config::from_toml_str("[controller]\nreaction_time = nan\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("controller.reaction_time"), "{e}");
+        for (key, bad) in [
+            ("auto_alpha_forward", "1.5"),
+            ("auto_alpha_backward", "-0.1"),
+            ("auto_alpha_curve_gain", "-1.0"),
+            ("auto_alpha_curvature_change_gain", "nan"),
+            ("auto_alpha_preview_s", "0.0"),
+            ("auto_alpha_large_error_m", "0.0"),
+            ("auto_alpha_error_gain", "-2.0"),
+        ] {
+            let e = Config::from_toml_str(&format!("[controller]\n{key} = {bad}\n"), "f.toml")
+                .unwrap_err();
+            assert!(e.to_string().contains(&format!("controller.{key}")), "{e}");
+        }
+        let c = Config::from_toml_str("[controller]\nalpha_mode = \"auto\"\n", "f.toml").unwrap();
+        assert_eq!(c.controller.alpha_mode, AlphaMode::Auto);
+        let e = Config::from_toml_str("[controller]\nalpha_mode = \"sometimes\"\n", "f.toml")
+            .unwrap_err();
+        assert!(e.to_string().contains("sometimes"), "{e}");
         let e = Config::from_toml_str("[controler]\n", "f.toml").unwrap_err();
         assert!(e.to_string().contains("controler"), "{e}");
         let e = Config::from_toml_str("[controller]\ndirection = \"sideways\"\n", "f.toml")

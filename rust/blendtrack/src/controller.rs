@@ -7,10 +7,11 @@
 //! [`ControlOutput`]: the steering and acceleration commands plus the errors
 //! of the control point `P(alpha)` that studies report.
 
-use crate::config::{validate_vehicle, ControllerConfig, LateralKind};
+use crate::config::{validate_vehicle, AlphaMode, ControllerConfig, LateralKind};
 use crate::error::{ConfigError, StateError};
 use crate::lateral::{
-    blend, pure_pursuit_command, rear_command, stanley_command, travel_heading, LateralGains,
+    auto_alpha, blend, lookahead_forcing, pure_pursuit_command, rear_command, stanley_command,
+    travel_heading, AutoAlphaInputs, AutoAlphaParams, LateralGains,
 };
 use crate::longitudinal::{longitudinal_accel, relevance_distance, Corridor, Obstacle};
 use crate::path::{wrap_angle, Path};
@@ -69,6 +70,7 @@ pub struct Controller {
     track: Arc<Track>,
     cfg: ControllerConfig,
     gains: LateralGains,
+    auto: AutoAlphaParams,
     max_steering_rad: f64,
     hint_rear: Option<f64>,
     hint_front: Option<f64>,
@@ -102,10 +104,19 @@ impl Controller {
             pure_pursuit_gain_s: cfg.pure_pursuit_gain_s,
             pure_pursuit_min_lookahead_m: cfg.pure_pursuit_min_lookahead_m,
         };
+        let auto = AutoAlphaParams {
+            base_forward: cfg.auto_alpha_forward,
+            base_backward: cfg.auto_alpha_backward,
+            curve_gain: cfg.auto_alpha_curve_gain,
+            curvature_change_gain: cfg.auto_alpha_curvature_change_gain,
+            large_error_m: cfg.auto_alpha_large_error_m,
+            error_gain: cfg.auto_alpha_error_gain,
+        };
         Ok(Controller {
             track,
             cfg,
             gains,
+            auto,
             max_steering_rad: vehicle.max_steering_rad(),
             hint_rear: None,
             hint_front: None,
@@ -161,7 +172,38 @@ impl Controller {
         }
     }
 
-    /// One step with blend factor `alpha` (in [0, 1]; it may change every step).
+    /// The automatic blend factor for this step (`alpha_mode = "auto"`): the
+    /// path's largest curvature and the rear law's largest forcing over the
+    /// preview window ahead of the rear axle's foot (4 points over
+    /// `max(E, auto_alpha_preview_s |v|)`) and the axle errors, through [`auto_alpha`].
+    fn auto_alpha(&self, s_rear: f64, e_front: f64, e_rear: f64, speed: f64) -> f64 {
+        let g = &self.gains;
+        let path = &self.track.path;
+        let l = g.curvature_lookahead(speed);
+        let preview = g.wheelbase_m.max(self.cfg.auto_alpha_preview_s * speed);
+        let (mut forcing, mut kappa) = (0.0f64, 0.0f64);
+        for k in 0..4 {
+            let s = s_rear + preview * k as f64 / 3.0;
+            forcing = forcing.max(lookahead_forcing(path, s, l).abs());
+            kappa = kappa.max(path.curvature_at(s).abs());
+        }
+        auto_alpha(
+            &self.auto,
+            &AutoAlphaInputs {
+                direction: self.cfg.direction,
+                wheelbase_m: g.wheelbase_m,
+                target_distance_m: g.target_distance(speed),
+                curvature_abs_per_m: kappa,
+                forcing_per_m: forcing,
+                front_error_abs_m: e_front.abs(),
+                rear_error_abs_m: e_rear.abs(),
+            },
+        )
+    }
+
+    /// One step with blend factor `alpha` (in [0, 1]; it may change every
+    /// step). With `alpha_mode = "auto"` the blend uses the automatic alpha
+    /// instead (still checked: the caller's value must be in [0, 1]).
     pub fn step_with_alpha(
         &mut self,
         measured: &VehicleState,
@@ -215,6 +257,10 @@ impl Controller {
             front.curvature_per_m = path.curvature_at_from(front.s, front.segment);
         }
         self.hint_front = Some(front.s);
+        let alpha = match self.cfg.alpha_mode {
+            AlphaMode::Fixed => alpha,
+            AlphaMode::Auto => self.auto_alpha(rear.s, front.lateral_m, rear.lateral_m, speed),
+        };
         let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
             LateralKind::Blend => {
                 let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);

@@ -227,6 +227,112 @@ pub fn blend(alpha: f64, delta_front: f64, delta_rear: f64) -> f64 {
     alpha * delta_front + (1.0 - alpha) * delta_rear
 }
 
+/// Parameters of the automatic blend factor (the `auto_alpha_*` config keys).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AutoAlphaParams {
+    /// Alpha in a steady curve (constant curvature, small errors), forward
+    /// and backward.
+    pub base_forward: f64,
+    pub base_backward: f64,
+    /// Weight of the path's curvature ahead (dimensionless, on `E |kappa|`).
+    pub curve_gain: f64,
+    /// Weight of the rear law's predicted look-ahead error (dimensionless).
+    pub curvature_change_gain: f64,
+    /// Axle error (m) from which the leading axle's law takes over fully.
+    pub large_error_m: f64,
+    /// Weight of the axle-error balance (1/m).
+    pub error_gain: f64,
+}
+
+/// What the automatic blend factor is chosen from (one step's state).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AutoAlphaInputs {
+    pub direction: Direction,
+    pub wheelbase_m: f64,
+    /// Target distance `d` of the rear law at the current speed (m).
+    pub target_distance_m: f64,
+    /// Largest |curvature| of the path over the preview window ahead (1/m).
+    pub curvature_abs_per_m: f64,
+    /// Largest |forcing| of the rear law over the preview window ahead (1/m):
+    /// [`lookahead_forcing`] at the rear axle's foot and a few points ahead.
+    pub forcing_per_m: f64,
+    /// |lateral error| of the front and rear axle (m).
+    pub front_error_abs_m: f64,
+    pub rear_error_abs_m: f64,
+}
+
+/// The rear law's curvature forcing at arc length `s`: the curvature its
+/// look-ahead term feeds forward, `(theta_path(s + L) - theta_path(s)) / L`
+/// (the mean curvature over the next `L` metres), minus the curvature at
+/// `s`. Zero on a circle or a straight line; `c L / 2` on a clothoid whose
+/// curvature grows at `c` per metre. Linearised about the path, the rear
+/// axle's error obeys `e'' + (2/d + 1/L) e' + (2/d^2) e = forcing(s)` (primes:
+/// d/ds), so a forcing `f` held long enough leaves the error `d^2 f / 2`.
+pub fn lookahead_forcing(path: &Path, s: f64, lookahead_m: f64) -> f64 {
+    let dtheta = wrap_angle(path.heading_at(s + lookahead_m) - path.heading_at(s));
+    dtheta / lookahead_m - path.curvature_at(s)
+}
+
+/// Automatic blend factor, a pure function of the step's state:
+///
+/// `alpha = clamp(lead + (base - lead) c (1 - w_k) (1 - w_e) + g_e (|e_front| - |e_rear|), 0, 1)`
+///
+/// - `lead`: the law of the LEADING axle, which brings the vehicle onto the
+///   path fastest and is the most precise on a straight: Stanley (1) forward,
+///   the rear law (0) backward (reversing, the rear axle leads and Stanley's
+///   gain must stay weak, see the module docs).
+/// - `base`: `base_forward` / `base_backward`, the alpha in a steady curve.
+///   There a rigid vehicle cannot keep both axles on the path: Stanley puts
+///   the front axle on it and the rear axle cuts the curve by about
+///   `E^2 |kappa| / 2`; the rear law does the opposite. A control point
+///   between them splits the difference (about `E^2 |kappa| / 4` each).
+/// - `c = min(1, curve_gain E |kappa|)`, `kappa` the largest curvature over the
+///   preview window: how much of a curve there is to balance.
+/// - `w_k = min(1, curvature_change_gain (d^2 |f| / 2) / E)`: the rear law's
+///   predicted steady error where the curvature changes ahead
+///   ([`lookahead_forcing`]), in wheelbases; there the leading law keeps the
+///   vehicle (Stanley's front error does not depend on the curvature).
+/// - `w_e = min(1, max(|e_front|, |e_rear|) / large_error_m)`: far from the
+///   path (the initial approach), the leading law.
+/// - `g_e (|e_front| - |e_rear|)`: the control point moves toward the axle
+///   that is further off the path (`g_e = error_gain`, 1/m).
+///
+/// Limits (tested): always in [0, 1]; `lead` on a straight path with zero
+/// errors, with a saturated forcing, or with an error of `large_error_m` or
+/// more on both axles; `base` in a curve with `c = 1`, no forcing and zero
+/// errors. A NaN input gives `lead`.
+pub fn auto_alpha(p: &AutoAlphaParams, x: &AutoAlphaInputs) -> f64 {
+    let (lead, base) = match x.direction {
+        Direction::Forward => (1.0, p.base_forward),
+        Direction::Backward => (0.0, p.base_backward),
+    };
+    let inputs = [
+        x.wheelbase_m,
+        x.target_distance_m,
+        x.curvature_abs_per_m,
+        x.forcing_per_m,
+        x.front_error_abs_m,
+        x.rear_error_abs_m,
+    ];
+    if !inputs.iter().all(|v| v.is_finite()) {
+        return lead;
+    }
+    let e = x.wheelbase_m;
+    let d = x.target_distance_m;
+    let c = (p.curve_gain * e * x.curvature_abs_per_m.abs()).min(1.0);
+    let predicted = 0.5 * d * d * x.forcing_per_m.abs();
+    let w_k = (p.curvature_change_gain * predicted / e).min(1.0);
+    let (ef, er) = (x.front_error_abs_m.abs(), x.rear_error_abs_m.abs());
+    let w_e = (ef.max(er) / p.large_error_m).min(1.0);
+    let balance = p.error_gain * (ef - er);
+    let a = lead + (base - lead) * c * (1.0 - w_k) * (1.0 - w_e) + balance;
+    if a.is_finite() {
+        a.clamp(0.0, 1.0)
+    } else {
+        lead
+    }
+}
+
 /// How alpha evolves over time. Values are clamped to [0, 1].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
@@ -411,4 +517,127 @@ mod tests {
             0.5
         );
     }
+
+    fn auto_inputs(
+        direction: Direction,
+        kappa: f64,
+        forcing: f64,
+        e_f: f64,
+        e_r: f64,
+    ) -> AutoAlphaInputs {
+        AutoAlphaInputs {
+            direction,
+            wheelbase_m: 2.6,
+            target_distance_m: 4.0,
+            curvature_abs_per_m: kappa,
+            forcing_per_m: forcing,
+            front_error_abs_m: e_f,
+            rear_error_abs_m: e_r,
+        }
+    }
+
+    #[test]
+    fn auto_alpha_limits() {
+        let p = AutoAlphaParams {
+            base_forward: 0.4,
+            base_backward: 0.7,
+            curve_gain: 10.0,
+            curvature_change_gain: 2.0,
+            large_error_m: 0.5,
+            error_gain: 0.0,
+        };
+        let (fw, bw) = (Direction::Forward, Direction::Backward);
+        // Straight path, on it: the leading axle's law.
+        assert_eq!(auto_alpha(&p, &auto_inputs(fw, 0.0, 0.0, 0.0, 0.0)), 1.0);
+        assert_eq!(auto_alpha(&p, &auto_inputs(bw, 0.0, 0.0, 0.0, 0.0)), 0.0);
+        // Steady curve (c = min(1, 10 * 2.6 * 0.05) = 1), no forcing, on the path: the base.
+        assert!((auto_alpha(&p, &auto_inputs(fw, 0.05, 0.0, 0.0, 0.0)) - 0.4).abs() < 1e-12);
+        assert!((auto_alpha(&p, &auto_inputs(bw, 0.05, 0.0, 0.0, 0.0)) - 0.7).abs() < 1e-12);
+        // A gentle curve: c = 10 * 2.6 * 0.01 = 0.26 of the way to the base.
+        let a = auto_alpha(&p, &auto_inputs(fw, 0.01, 0.0, 0.0, 0.0));
+        assert!((a - (1.0 - 0.6 * 0.26)).abs() < 1e-12, "{a}");
+        // Forcing f: predicted error d^2 f / 2 = 8 f; w_k = 2 * 8 f / 2.6.
+        let f = 0.01;
+        let w_k = 2.0 * 8.0 * f / 2.6;
+        let a = auto_alpha(&p, &auto_inputs(fw, 0.05, -f, 0.0, 0.0));
+        assert!((a - (1.0 - 0.6 * (1.0 - w_k))).abs() < 1e-12, "{a}");
+        // Saturated forcing, or far from the path: the leading law.
+        assert_eq!(auto_alpha(&p, &auto_inputs(fw, 0.05, 1.0, 0.0, 0.0)), 1.0);
+        assert_eq!(auto_alpha(&p, &auto_inputs(fw, 0.05, 0.0, 0.5, 0.6)), 1.0);
+        assert_eq!(auto_alpha(&p, &auto_inputs(bw, 0.05, 0.0, 3.0, 0.0)), 0.0);
+        // Half way to the large error: half way back from the base.
+        let a = auto_alpha(&p, &auto_inputs(fw, 0.05, 0.0, 0.25, 0.25));
+        assert!((a - 0.7).abs() < 1e-12, "{a}");
+        // Error balance: toward the axle that is further off.
+        let pe = AutoAlphaParams {
+            error_gain: 2.0,
+            ..p
+        };
+        let a = auto_alpha(&pe, &auto_inputs(fw, 0.05, 0.0, 0.15, 0.05));
+        let w_e = 0.15 / 0.5;
+        assert!((a - (1.0 - 0.6 * (1.0 - w_e) + 0.2)).abs() < 1e-12, "{a}");
+        let a = auto_alpha(&pe, &auto_inputs(bw, 0.05, 0.0, 0.05, 0.15));
+        assert!((a - (0.7 * (1.0 - w_e) - 0.2)).abs() < 1e-12, "{a}");
+        // Always in [0, 1], whatever the inputs; NaN gives the leading law.
+        for &k in &[0.0, 0.02, 1.0] {
+            for &f in &[0.0, 1e-3, 10.0] {
+                for &ef in &[0.0, 0.1, 5.0] {
+                    for &er in &[0.0, 0.1, 5.0] {
+                        for dir in [fw, bw] {
+                            let a = auto_alpha(&pe, &auto_inputs(dir, k, f, ef, er));
+                            assert!((0.0..=1.0).contains(&a), "{k} {f} {ef} {er}: {a}");
+                        }
+                    }
+                }
+            }
+        }
+        assert_eq!(
+            auto_alpha(&p, &auto_inputs(fw, f64::NAN, 0.0, 0.0, 0.0)),
+            1.0
+        );
+        assert_eq!(
+            auto_alpha(&p, &auto_inputs(bw, 0.05, f64::NAN, 0.0, 0.0)),
+            0.0
+        );
+    }
+
+    #[test]
+    fn lookahead_forcing_closed_forms() {
+        // Zero on a circle (constant curvature) and on a straight line.
+        let c = Path::circle(40.0, 1e-4).unwrap();
+        for s in [0.0, 30.0, 100.0] {
+            assert!(lookahead_forcing(&c, s, 8.0).abs() < 1e-4);
+        }
+        let st = Path::straight(200.0, 1.0).unwrap();
+        assert!(lookahead_forcing(&st, 50.0, 8.0).abs() < 1e-12);
+        // Clothoid kappa(s) = c s: forcing c L / 2.
+        let (cc, l) = (1.0 / 2000.0, 10.0);
+        let pts = clothoid(cc, 0.05, 100.0);
+        let path = Path::new(&pts, None, false).unwrap();
+        for s in [20.0, 50.0, 80.0] {
+            let f = lookahead_forcing(&path, s, l);
+            assert!(
+                (f - cc * l / 2.0).abs() < 2e-4,
+                "s={s}: {f} vs {}",
+                cc * l / 2.0
+            );
+        }
+    }
+
+    /// Points of the clothoid `kappa(s) = c s` from the origin heading +x, every `ds` up to `len`.
+    fn clothoid(c: f64, ds: f64, len: f64) -> Vec<[f64; 2]> {
+        let n = (len / ds).round() as usize;
+        let (mut x, mut y) = (0.0, 0.0);
+        let mut out = vec![[x, y]];
+        for i in 0..n {
+            // Heading at the middle of the step: c s^2 / 2.
+            let sm = (i as f64 + 0.5) * ds;
+            let th = 0.5 * c * sm * sm;
+            x += ds * th.cos();
+            y += ds * th.sin();
+            out.push([x, y]);
+        }
+        out
+    }
+
 }

@@ -36,7 +36,7 @@ pub mod sim;
 pub mod stats;
 pub mod vehicle;
 
-pub use config::{Config, ControllerConfig, Experiment, ExperimentSet, LateralKind};
+pub use config::{AlphaMode, Config, ControllerConfig, Experiment, ExperimentSet, LateralKind};
 pub use controller::{ControlOutput, Controller, Track};
 pub use error::{ConfigError, Error, PathError, StateError};
 pub use fleet::{Fleet, FleetError, FleetInputs, FleetOutputs, NextStates};

@@ -30,11 +30,24 @@
 //!   sample is still at or above the threshold never settles:
 //!   `settling_time_s` is `None` (NaN in Python, `null` in JSON) and so are
 //!   the after-settling metrics.
-//! - `overshoot_m`: the largest excursion to the side of the path opposite
-//!   to the initial offset, `max(0, max_i(-sign(e_0) e_i))` over the whole
-//!   run; 0 if `e_0 = 0` (no side to overshoot from) or the error never
-//!   changes sign. After settling |e| < 0.1 m by definition, so an overshoot
-//!   above that comes from the transient.
+//! - `initial_overshoot_m`: the overshoot of the initial approach. With
+//!   `side = sign(e_0)`, the first crossing is the first sample `c` on the
+//!   other side (`side e_c < 0`); the overshoot is the peak
+//!   `max(-side e_i)` over the samples from `c` up to (not including) the next
+//!   sample back on the starting side. 0 if `e_0 = 0` (no side to overshoot
+//!   from) or the error never crosses. Later excursions (a corner cut a lap
+//!   later) do not count: `opposite_side_max_m` is the largest excursion to
+//!   the opposite side anywhere in the run, `max(0, max_i(-side e_i))`.
+//! - Per axle (when the series carries the true front and rear axle errors,
+//!   the same two points whatever alpha is, so runs with different alphas
+//!   compare there; NaN otherwise):
+//!   `lateral_error_front_axle_mean_abs_m` = mean |e_front|,
+//!   `lateral_error_rear_axle_mean_abs_m` = mean |e_rear|,
+//!   `body_error_mean_m` = mean over the run of `max(|e_front|, |e_rear|)`
+//!   (for a rigid body on a kinematic bicycle, the larger of the two axles'
+//!   errors bounds how far the wheelbase strays from the path: every point
+//!   between the axles is within it when the path is nearly straight
+//!   there), `body_error_max_m` its maximum.
 //! - Reaching: the first sample `r` with |e| below the threshold, even if the
 //!   error leaves it again later (`reached_time_s`, same time convention).
 //!   [`RunMetrics::reached`] = the window metrics over samples `r..n`: a
@@ -46,6 +59,8 @@
 //! - "After settling" ([`RunMetrics::settled`]) = the same window metrics over
 //!   samples `k..n`: the quantity the paper's Table 2 reports as "average
 //!   distance after initialization" is `settled.lateral_error_mean_abs_m`.
+//!   A lap with corners keeps brushing past 0.1 m, so "settled for good" can
+//!   come late (the last seconds of a lap); the report reads "after reaching".
 
 use crate::sim::Trace;
 use crate::stats::{TrackingSample, TrackingStats};
@@ -77,7 +92,12 @@ pub struct RunMetrics {
     pub settling_time_s: Option<f64>,
     /// Index of the first settled sample (`None`: never settled).
     pub settled_index: Option<usize>,
-    pub overshoot_m: f64,
+    /// Overshoot of the initial approach (see the module docs).
+    pub initial_overshoot_m: f64,
+    /// Largest excursion to the side opposite the start, anywhere in the run.
+    pub opposite_side_max_m: f64,
+    /// Per-axle and body errors over the whole run (NaN without axle columns).
+    pub axles: AxleMetrics,
     /// The window after settling (`None`: never settled).
     pub settled: Option<WindowMetrics>,
     /// Time from the start at which |e| first fell below the threshold.
@@ -86,11 +106,38 @@ pub struct RunMetrics {
     pub reached: Option<WindowMetrics>,
 }
 
+/// Errors of the true front and rear axles over a run (NaN when the series
+/// has no axle columns).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxleMetrics {
+    pub lateral_error_front_axle_mean_abs_m: f64,
+    pub lateral_error_rear_axle_mean_abs_m: f64,
+    /// Mean of `max(|e_front|, |e_rear|)`.
+    pub body_error_mean_m: f64,
+    /// Max of `max(|e_front|, |e_rear|)`.
+    pub body_error_max_m: f64,
+}
+
+impl Default for AxleMetrics {
+    fn default() -> Self {
+        AxleMetrics {
+            lateral_error_front_axle_mean_abs_m: f64::NAN,
+            lateral_error_rear_axle_mean_abs_m: f64::NAN,
+            body_error_mean_m: f64::NAN,
+            body_error_max_m: f64::NAN,
+        }
+    }
+}
+
 /// The columns the metrics read, borrowed from a trace or built by hand.
+/// `lateral_error_front_m` and `lateral_error_rear_m` may be empty (not
+/// recorded): the axle metrics are then NaN.
 #[derive(Debug, Clone, Copy)]
 pub struct Series<'a> {
     pub t_s: &'a [f64],
     pub lateral_error_m: &'a [f64],
+    pub lateral_error_front_m: &'a [f64],
+    pub lateral_error_rear_m: &'a [f64],
     pub heading_error_rad: &'a [f64],
     pub delta_rad: &'a [f64],
     pub v_mps: &'a [f64],
@@ -102,6 +149,8 @@ impl<'a> From<&'a Trace> for Series<'a> {
         Series {
             t_s: &t.t_s,
             lateral_error_m: &t.lateral_error_m,
+            lateral_error_front_m: &t.lateral_error_front_m,
+            lateral_error_rear_m: &t.lateral_error_rear_m,
             heading_error_rad: &t.heading_error_rad,
             delta_rad: &t.delta_rad,
             v_mps: &t.v_mps,
@@ -200,19 +249,59 @@ pub fn settled_index(lateral_error_m: &[f64], threshold_m: f64) -> Option<usize>
     }
 }
 
-/// `max(0, max_i(-sign(e_0) e_i))`, 0 if `e_0 = 0` (see the module docs).
-pub fn overshoot(lateral_error_m: &[f64]) -> f64 {
-    let Some(&e0) = lateral_error_m.first() else {
+/// `max(0, max_i(-sign(e_0) e_i))` over the whole run, 0 if `e_0 = 0`.
+pub fn opposite_side_max(lateral_error_m: &[f64]) -> f64 {
+    let Some(side) = start_side(lateral_error_m) else {
         return 0.0;
     };
-    if e0 == 0.0 || !e0.is_finite() {
-        return 0.0;
-    }
-    let side = e0.signum();
     lateral_error_m
         .iter()
         .filter(|e| e.is_finite())
         .fold(0.0f64, |m, e| m.max(-side * e))
+}
+
+fn start_side(lateral_error_m: &[f64]) -> Option<f64> {
+    let &e0 = lateral_error_m.first()?;
+    (e0 != 0.0 && e0.is_finite()).then(|| e0.signum())
+}
+
+/// The initial approach's overshoot: the peak on the other side between the
+/// first crossing and the next one back (see the module docs).
+pub fn initial_overshoot(lateral_error_m: &[f64]) -> f64 {
+    let Some(side) = start_side(lateral_error_m) else {
+        return 0.0;
+    };
+    let Some(c) = lateral_error_m.iter().position(|e| side * e < 0.0) else {
+        return 0.0;
+    };
+    lateral_error_m[c..]
+        .iter()
+        .take_while(|e| !(side * **e > 0.0))
+        .filter(|e| e.is_finite())
+        .fold(0.0f64, |m, e| m.max(-side * e))
+}
+
+/// Front, rear and body errors of the first `n` samples (NaN when either
+/// axle column is shorter than `n` or `n = 0`).
+pub fn axle_metrics(front: &[f64], rear: &[f64], n: usize) -> AxleMetrics {
+    if n == 0 || front.len() < n || rear.len() < n {
+        return AxleMetrics::default();
+    }
+    let (mut sf, mut sr, mut sb, mut mb) = (0.0, 0.0, 0.0, 0.0f64);
+    for (f, r) in front[..n].iter().zip(&rear[..n]) {
+        let b = f.abs().max(r.abs());
+        sf += f.abs();
+        sr += r.abs();
+        sb += b;
+        mb = mb.max(b);
+    }
+    let k = n as f64;
+    AxleMetrics {
+        lateral_error_front_axle_mean_abs_m: sf / k,
+        lateral_error_rear_axle_mean_abs_m: sr / k,
+        body_error_mean_m: sb / k,
+        body_error_max_m: mb,
+    }
 }
 
 /// All metrics of a series (see the module docs for the definitions).
@@ -228,7 +317,9 @@ pub fn run_metrics(s: &Series<'_>, wheelbase_m: f64) -> RunMetrics {
         whole: window_metrics(s, 0..n, wheelbase_m),
         settling_time_s: k.map(|k| s.t_s[k] - s.t_s[0] + step0),
         settled_index: k,
-        overshoot_m: overshoot(errs),
+        initial_overshoot_m: initial_overshoot(errs),
+        opposite_side_max_m: opposite_side_max(errs),
+        axles: axle_metrics(s.lateral_error_front_m, s.lateral_error_rear_m, n),
         settled: k.map(|k| window_metrics(s, k..n, wheelbase_m)),
     }
 }
@@ -240,12 +331,13 @@ pub fn trace_metrics(trace: &Trace, wheelbase_m: f64) -> RunMetrics {
 
 impl RunMetrics {
     /// The flat `(key, value)` list written to `metrics.json` (NaN where a
-    /// metric does not exist: never settled).
+    /// metric does not exist: never settled, never reached, no axle columns).
     pub fn to_named(&self) -> Vec<(&'static str, f64)> {
         let w = &self.whole;
         let nan = f64::NAN;
-        let st = self.settled;
-        let sv = |f: fn(&WindowMetrics) -> f64| st.as_ref().map(f).unwrap_or(nan);
+        let sv = |f: fn(&WindowMetrics) -> f64| self.settled.as_ref().map(f).unwrap_or(nan);
+        let rv = |f: fn(&WindowMetrics) -> f64| self.reached.as_ref().map(f).unwrap_or(nan);
+        let ax = &self.axles;
         vec![
             ("lateral_error_mean_abs_m", w.lateral_error_mean_abs_m),
             ("lateral_error_rms_m", w.lateral_error_rms_m),
@@ -254,10 +346,15 @@ impl RunMetrics {
             ("steering_rate_rms_deg_s", w.steering_rate_rms_deg_s),
             ("steering_rate_max_deg_s", w.steering_rate_max_deg_s),
             ("lateral_accel_max_mps2", w.lateral_accel_max_mps2),
+            ("reached_time_s", self.reached_time_s.unwrap_or(nan)),
             ("settling_time_s", self.settling_time_s.unwrap_or(nan)),
-            ("overshoot_m", self.overshoot_m),
+            ("initial_overshoot_m", self.initial_overshoot_m),
             ("mean_speed_mps", w.mean_speed_mps),
             ("distance_m", w.distance_m),
+            (
+                "lateral_error_mean_abs_m_reached",
+                rv(|m| m.lateral_error_mean_abs_m),
+            ),
             (
                 "lateral_error_mean_abs_m_settled",
                 sv(|m| m.lateral_error_mean_abs_m),
@@ -271,22 +368,27 @@ impl RunMetrics {
                 "heading_error_rms_deg_settled",
                 sv(|m| m.heading_error_rms_deg),
             ),
+            (
+                "lateral_error_front_axle_mean_abs_m",
+                ax.lateral_error_front_axle_mean_abs_m,
+            ),
+            (
+                "lateral_error_rear_axle_mean_abs_m",
+                ax.lateral_error_rear_axle_mean_abs_m,
+            ),
+            ("body_error_mean_m", ax.body_error_mean_m),
+            ("body_error_max_m", ax.body_error_max_m),
         ]
     }
-}
 
-impl RunMetrics {
-    /// Metrics beyond the `metrics.json` keys: the window after first
-    /// reaching the threshold (NaN where it never does).
+    /// Metrics beyond the `metrics.json` keys: the largest opposite-side
+    /// excursion and the rest of the window after first reaching the
+    /// threshold (NaN where it never does).
     pub fn to_named_extra(&self) -> Vec<(&'static str, f64)> {
         let nan = f64::NAN;
         let rv = |f: fn(&WindowMetrics) -> f64| self.reached.as_ref().map(f).unwrap_or(nan);
         vec![
-            ("reached_time_s", self.reached_time_s.unwrap_or(nan)),
-            (
-                "lateral_error_mean_abs_m_reached",
-                rv(|m| m.lateral_error_mean_abs_m),
-            ),
+            ("opposite_side_max_m", self.opposite_side_max_m),
             ("lateral_error_rms_m_reached", rv(|m| m.lateral_error_rms_m)),
             (
                 "lateral_error_max_abs_m_reached",
@@ -307,6 +409,8 @@ mod tests {
     struct Cols {
         t: Vec<f64>,
         e: Vec<f64>,
+        front: Vec<f64>,
+        rear: Vec<f64>,
         h: Vec<f64>,
         d: Vec<f64>,
         v: Vec<f64>,
@@ -323,6 +427,8 @@ mod tests {
             Cols {
                 t,
                 e: e.to_vec(),
+                front: vec![],
+                rear: vec![],
                 h: vec![0.0; n],
                 d: vec![0.0; n],
                 v: vec![2.0; n],
@@ -333,6 +439,8 @@ mod tests {
             Series {
                 t_s: &self.t,
                 lateral_error_m: &self.e,
+                lateral_error_front_m: &self.front,
+                lateral_error_rear_m: &self.rear,
                 heading_error_rad: &self.h,
                 delta_rad: &self.d,
                 v_mps: &self.v,
@@ -409,16 +517,53 @@ mod tests {
     }
 
     #[test]
-    fn overshoot_is_the_opposite_side_excursion() {
-        // Starts left (+4), crosses to -0.7 at worst, comes back.
-        assert!(close(overshoot(&[4.0, 2.0, -0.3, -0.7, -0.2, 0.05]), 0.7));
+    fn initial_overshoot_is_the_peak_between_the_first_two_crossings() {
+        // Starts left (+4), crosses at sample 2, peaks at -0.7, crosses back
+        // at sample 5; a later corner cut to -1.5 is not the initial overshoot.
+        let e = [4.0, 2.0, -0.3, -0.7, -0.2, 0.05, 0.0, -1.5, 0.0];
+        assert!(close(initial_overshoot(&e), 0.7));
+        assert!(close(opposite_side_max(&e), 1.5));
+        let m = run_metrics(&Cols::new(&e).series(), 2.6);
+        assert!(close(m.initial_overshoot_m, 0.7));
+        assert!(close(m.opposite_side_max_m, 1.5));
+        // Samples at exactly 0 do not end the excursion; only a sample back
+        // on the starting side does.
+        assert!(close(
+            initial_overshoot(&[1.0, -0.2, 0.0, -0.4, 0.3, -2.0]),
+            0.4
+        ));
         // Starts right: the overshoot is on the left.
-        assert!(close(overshoot(&[-4.0, -1.0, 0.4, 0.1]), 0.4));
+        assert!(close(initial_overshoot(&[-4.0, -1.0, 0.4, 0.1]), 0.4));
         // Never crosses.
-        assert_eq!(overshoot(&[4.0, 2.0, 0.5, 0.0]), 0.0);
+        assert_eq!(initial_overshoot(&[4.0, 2.0, 0.5, 0.0]), 0.0);
         // No initial offset, no side to overshoot from.
-        assert_eq!(overshoot(&[0.0, 1.0, -1.0]), 0.0);
-        assert_eq!(overshoot(&[]), 0.0);
+        assert_eq!(initial_overshoot(&[0.0, 1.0, -1.0]), 0.0);
+        assert_eq!(opposite_side_max(&[0.0, 1.0, -1.0]), 0.0);
+        assert_eq!(initial_overshoot(&[]), 0.0);
+        // A damped oscillation e_i = 2 (-0.5)^i: first crossing at i = 1,
+        // peak 1.0 there (the next crossing back is at i = 2).
+        let e: Vec<f64> = (0..10).map(|i| 2.0 * (-0.5f64).powi(i)).collect();
+        assert!(close(initial_overshoot(&e), 1.0));
+    }
+
+    #[test]
+    fn axle_and_body_errors_by_hand() {
+        let mut c = Cols::new(&[0.0; 4]);
+        // Body = max(|front|, |rear|) = 0.3, 0.2, 0.5, 0.0.
+        c.front = vec![0.3, -0.1, 0.0, 0.0];
+        c.rear = vec![-0.1, 0.2, -0.5, 0.0];
+        let m = run_metrics(&c.series(), 2.6);
+        assert!(close(m.axles.lateral_error_front_axle_mean_abs_m, 0.1));
+        assert!(close(m.axles.lateral_error_rear_axle_mean_abs_m, 0.2));
+        assert!(close(m.axles.body_error_mean_m, 0.25));
+        assert!(close(m.axles.body_error_max_m, 0.5));
+        let named = m.to_named();
+        let get = |k: &str| named.iter().find(|(n, _)| *n == k).unwrap().1;
+        assert!(close(get("body_error_mean_m"), 0.25));
+        assert!(close(get("lateral_error_front_axle_mean_abs_m"), 0.1));
+        // Without axle columns: NaN, not 0.
+        let m = run_metrics(&Cols::new(&[0.0; 4]).series(), 2.6);
+        assert!(m.axles.body_error_mean_m.is_nan());
     }
 
     #[test]

@@ -158,6 +158,10 @@ pub struct Trace {
     pub s_m: Vec<f64>,
     /// Signed lateral error of the true control point (m).
     pub lateral_error_m: Vec<f64>,
+    /// Signed lateral errors of the true front and rear axles (m): the same
+    /// two points whatever alpha is (the body error is the larger of the two).
+    pub lateral_error_front_m: Vec<f64>,
+    pub lateral_error_rear_m: Vec<f64>,
     /// Heading error along the direction of travel at the control point (rad).
     pub heading_error_rad: Vec<f64>,
     /// Applied acceleration along the direction of travel (m/s^2).
@@ -188,6 +192,8 @@ impl Trace {
             &mut self.alpha,
             &mut self.s_m,
             &mut self.lateral_error_m,
+            &mut self.lateral_error_front_m,
+            &mut self.lateral_error_rear_m,
             &mut self.heading_error_rad,
             &mut self.accel_mps2,
             &mut self.virtual_obstacle_m,
@@ -248,6 +254,7 @@ pub fn simulate(
     let mut ctrl = Controller::new(track.clone(), cfg.clone(), vehicle_params)?;
     // The observer of the true control point keeps its own projection hint.
     let mut truth_hint: Option<f64> = None;
+    let mut axle_hints: [Option<f64>; 2] = [None, None];
     let mut sensor = Sensor::new(opts.noise, opts.seed);
     let lap_target = opts.laps.map(|l| l * track.path.length());
     let mut trace = Trace::default();
@@ -285,6 +292,13 @@ pub fn simulate(
             truth_hint,
         );
         truth_hint = Some(cp.s);
+        // The true front (alpha = 1) and rear (alpha = 0) axles, each with its own hint.
+        let [front_e, rear_e] = [(0, 1.0), (1, 0.0)].map(|(i, a)| {
+            let p = st.control_point(vehicle_params.wheelbase_m, a);
+            let pr = track.path.project_with_no_curvature(&p, axle_hints[i]);
+            axle_hints[i] = Some(pr.s);
+            pr.lateral_m
+        });
         let th_travel = crate::lateral::travel_heading(st.theta_rad, cfg.direction);
         trace.t_s.push(t + dt);
         trace.x_m.push(st.x_m);
@@ -295,6 +309,8 @@ pub fn simulate(
         trace.alpha.push(out.alpha);
         trace.s_m.push(cp.s);
         trace.lateral_error_m.push(cp.lateral_m);
+        trace.lateral_error_front_m.push(front_e);
+        trace.lateral_error_rear_m.push(rear_e);
         trace
             .heading_error_rad
             .push(wrap_angle(th_travel - cp.heading_rad));
