@@ -27,7 +27,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 from blendtrack.sumo import RunOptions, SumoRun, resolve_scenario
-from blendtrack.sumo.runner import sumo_binary
+from blendtrack.sumo.connection import sumo_binary
 
 
 def plain(scenario_name: str, end: float, scale: float) -> dict[str, Any]:

@@ -16,7 +16,7 @@ import pytest
 
 from blendtrack import cli
 from blendtrack.sumo import compare
-from blendtrack.sumo.runner import _unit_hash
+from blendtrack.sumo.selection import unit_hash
 
 FRACTION = 0.3
 SEEDS = 2
@@ -78,7 +78,7 @@ def test_pairs_are_the_same_vehicles_in_both_runs(study: Path) -> None:
         with open(run / "treatment" / "vehicles.csv") as f:
             controlled = {r["id"] for r in csv.DictReader(f)}
         trips = ET.parse(run / "baseline" / "sumo" / "tripinfo.xml").getroot()
-        twins = {t.get("id") for t in trips.iter("tripinfo") if _unit_hash(seed, t.get("id", "")) < FRACTION}
+        twins = {t.get("id") for t in trips.iter("tripinfo") if unit_hash(seed, t.get("id", "")) < FRACTION}
         paired = {r["id"] for r in rows if int(r["seed"]) == seed}
         assert paired == controlled == twins, seed
 

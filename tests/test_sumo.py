@@ -139,7 +139,7 @@ def test_grid_with_every_vehicle_controlled_has_no_junction_collision(tmp_path: 
 def test_body_and_distance_to_a_path_in_closed_form() -> None:
     """A 4.5 m x 1.8 m vehicle facing east (SUMO angle 90, clockwise from
     north) with its front at (10, 0)."""
-    from blendtrack.sumo.runner import _body_segment, _segments_distance
+    from blendtrack.sumo.geometry import body_segment, segments_distance
 
     class Veh:
         def getPosition(self, vid: str) -> tuple[float, float]:
@@ -154,18 +154,18 @@ def test_body_and_distance_to_a_path_in_closed_form() -> None:
         def getWidth(self, vid: str) -> float:
             return 1.8
 
-    body, half = _body_segment(Veh(), "x")
+    body, half = body_segment(Veh(), "x")
     assert body == pytest.approx(np.array([[5.5, 0.0], [10.0, 0.0]]))
     assert half == pytest.approx(0.9)
     # A path crossing 3 m ahead of the front, from south to north.
-    assert _segments_distance(body, np.array([[13.0, -20.0], [13.0, 20.0]])) == pytest.approx(3.0)
+    assert segments_distance(body, np.array([[13.0, -20.0], [13.0, 20.0]])) == pytest.approx(3.0)
     # A path alongside, 2.9 m to the left of the centreline.
-    assert _segments_distance(body, np.array([[0.0, 2.9], [6.0, 2.9], [30.0, 2.9]])) == pytest.approx(2.9)
+    assert segments_distance(body, np.array([[0.0, 2.9], [6.0, 2.9], [30.0, 2.9]])) == pytest.approx(2.9)
     # A path through the body between its ends: they cross.
-    assert _segments_distance(body, np.array([[8.0, -5.0], [8.0, 5.0]])) == 0.0
+    assert segments_distance(body, np.array([[8.0, -5.0], [8.0, 5.0]])) == 0.0
     # Behind the back, at an angle: the back point's distance to the segment.
-    assert _segments_distance(body, np.array([[0.0, -3.0], [6.0, 3.0]])) == pytest.approx(abs(5.5 - 0.0 - 3.0) / math.sqrt(2.0))
-    assert _segments_distance(body, np.zeros((0, 2))) == math.inf
+    assert segments_distance(body, np.array([[0.0, -3.0], [6.0, 3.0]])) == pytest.approx(abs(5.5 - 0.0 - 3.0) / math.sqrt(2.0))
+    assert segments_distance(body, np.zeros((0, 2))) == math.inf
 
 
 def test_grid_waits_for_a_vehicle_standing_inside_the_junction(tmp_path: Path) -> None:
@@ -217,7 +217,7 @@ def test_obstacle_is_assumed_to_brake_like_the_vehicle_unless_set(tmp_path: Path
     def grab(key: str) -> Any:
         def hook(r: SumoRun, t: float) -> None:
             if key not in seen:
-                seen[key] = r._type_info("auto")["config"]
+                seen[key] = r.selection.type_info("auto")["config"]
         return hook
 
     run = SumoRun(sc, RunOptions(end_s=1.0, progress=False), None)
@@ -315,16 +315,16 @@ def test_the_tighter_of_two_leaders_is_the_one_the_stopping_law_brakes_harder_fo
     the other: collisions behind a vehicle giving way to a merger)."""
     run = SumoRun(sumo.resolve_scenario("highway_onramp"), RunOptions(progress=False))
     speeds = {"near": 20.0, "far": 0.0, "slow": 5.0}
-    run._get_speed = speeds.__getitem__
-    b = run._plan_decel
+    run.conn.get_speed = speeds.__getitem__
+    b = run.lanes.plan_decel
     assert 5.0 + 20.0**2 / (2 * b) > 30.0  # so the far, standing one is tighter
-    assert run._tighter_leader(("near", 5.0), ("far", 30.0)) == ("far", 30.0)
-    assert run._tighter_leader(("far", 30.0), ("near", 5.0)) == ("far", 30.0)
+    assert run.lanes.tighter_leader(("near", 5.0), ("far", 30.0)) == ("far", 30.0)
+    assert run.lanes.tighter_leader(("far", 30.0), ("near", 5.0)) == ("far", 30.0)
     # Equal speeds: the closer one.
-    assert run._tighter_leader(("slow", 12.0), ("slow", 8.0)) == ("slow", 8.0)
+    assert run.lanes.tighter_leader(("slow", 12.0), ("slow", 8.0)) == ("slow", 8.0)
     # No leader (None, or SUMO's empty answer) gives way to the other.
-    assert run._tighter_leader(None, ("near", 5.0)) == ("near", 5.0)
-    assert run._tighter_leader(("", -1.0), ("near", 5.0)) == ("near", 5.0)
+    assert run.lanes.tighter_leader(None, ("near", 5.0)) == ("near", 5.0)
+    assert run.lanes.tighter_leader(("", -1.0), ("near", 5.0)) == ("near", 5.0)
 
 
 def test_lane_change_is_given_up_when_the_room_goes(tmp_path: Path) -> None:
@@ -445,7 +445,7 @@ def test_lane_change_tracks_go_once_their_vehicle_leaves_them(tmp_path: Path) ->
     mismatches: list[tuple[float, int, int]] = []
 
     def count(r: SumoRun, t: float) -> None:
-        expected = len(r._geo_cache) + sum(1 for a in r.active.values() if a.own_track is not None)
+        expected = len(r.tracks.geo_cache) + sum(1 for a in r.active.values() if a.own_track is not None)
         if r.fleet.n_tracks != expected:
             mismatches.append((t, r.fleet.n_tracks, expected))
 
@@ -454,7 +454,7 @@ def test_lane_change_tracks_go_once_their_vehicle_leaves_them(tmp_path: Path) ->
     changes = sum(r.lane_changes for r in result.records)
     assert changes >= 30, changes
     assert mismatches[:3] == [], mismatches[:3]
-    assert run.fleet.n_tracks < len(run._geo_cache) + 10
+    assert run.fleet.n_tracks < len(run.tracks.geo_cache) + 10
 
 
 def test_tactical_lane_changes_watch_the_lane_beyond_the_target(tmp_path: Path) -> None:
@@ -493,7 +493,7 @@ def test_sumo_has_each_controlled_vehicle_where_blendtrack_has_it(tmp_path: Path
                 continue
             x, y, th, _, _ = r.fleet.state(act.slot)
             wheelbase = r.fleet.vehicle_params(act.slot).wheelbase_m
-            reach = wheelbase + max(0.5 * (r._type_info(act.record.vtype)["length"] - wheelbase), 0.0)
+            reach = wheelbase + max(0.5 * (r.selection.type_info(act.record.vtype)["length"] - wheelbase), 0.0)
             dx, dy = (p - q for p, q in zip(v.getPosition(vid), (x + reach * math.cos(th), y + reach * math.sin(th))))
             along = abs(dx * math.cos(th) + dy * math.sin(th))
             across = abs(-dx * math.sin(th) + dy * math.cos(th))
@@ -526,22 +526,22 @@ def test_leaders_read_off_lane_lists_are_the_ones_sumo_gives(tmp_path: Path) -> 
     def compare(r: SumoRun, t: float) -> None:
         if not r.active:
             return
-        r._refresh_order()
+        r.vehicles.refresh_order()
         present = set(r.sumo.vehicle.getIDList())
-        if any(vid not in present for vid in r._ids):
+        if any(vid not in present for vid in r.vehicles.ids):
             return  # arrivals are dropped after the hooks
-        lanes = r.fleet.lanes_with_followers(r._slots).tolist()
-        ask = r.fleet.leaders_on_lanes(r._slots, lanes, [r._lane_vehicles(r._lanes.name(x)) for x in lanes]).tolist()
+        lanes = r.fleet.lanes_with_followers(r.vehicles.slots).tolist()
+        ask = r.fleet.leaders_on_lanes(r.vehicles.slots, lanes, [r.conn.lane_vehicles(r.tracks.lanes.name(x)) for x in lanes]).tolist()
         listed = r.fleet.listed_leaders()
-        for i, vid in enumerate(r._ids):
-            want = r._get_leader(vid, 250.0)  # libsumo's own call, ("", -1) for none
+        for i, vid in enumerate(r.vehicles.ids):
+            want = r.conn.get_leader(vid, 250.0)  # libsumo's own call, ("", -1) for none
             if listed[i] is None:
                 assert i in ask
                 continue
             got = listed[i]
             assert got[0] == want[0] and abs(got[1] - want[1]) < 1e-6, (t, vid, got, want)
             compared[1] += 1
-        compared[0] += len(r._ids)
+        compared[0] += len(r.vehicles.ids)
 
     run.step_hooks.append(compare)
     run.run()
@@ -559,8 +559,8 @@ def test_border_margin_widens_the_virtual_borders_and_eases_the_curves(tmp_path:
         runs[margin] = (run, run.run())
     (narrow_run, narrow), (wide_run, wide) = runs[0.0], runs[3.0]
     assert wide.summary["border_margin_m"] == 3.0
-    geo_n = next(iter(narrow_run._geo_cache.values()))[0]
-    geo_w = next(iter(wide_run._geo_cache.values()))[0]
+    geo_n = next(iter(narrow_run.tracks.geo_cache.values()))[0]
+    geo_w = next(iter(wide_run.tracks.geo_cache.values()))[0]
     assert abs(float(geo_w.widths[0, 0]) - float(geo_n.widths[0, 0]) - 3.0) < 1e-12
     speed = {m: sum(r.sum_v for r in res.records) / sum(r.steps for r in res.records) for m, (_, res) in runs.items()}
     assert speed[3.0] > 1.05 * speed[0.0], speed
@@ -601,7 +601,7 @@ def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytes
     loaded again. A change to any of its files is a new check."""
     import subprocess as sp
 
-    from blendtrack.sumo import runner
+    from blendtrack.sumo import connection
 
     monkeypatch.setenv("BLENDTRACK_CACHE_DIR", str(tmp_path / "cache"))
     folder = tmp_path / "ring"
@@ -615,11 +615,11 @@ def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytes
         return real_run(cmd, *a, **k)
 
     monkeypatch.setattr(sp, "run", counting_run)
-    check = lambda: SumoRun(sc, RunOptions(progress=False), None)._check_loads()  # noqa: E731
+    check = lambda: SumoRun(sc, RunOptions(progress=False), None).conn.check_loads()  # noqa: E731
     check()
     check()
     assert len(children) == 1, "the second check is the marker's"
-    marker = runner.loads_ok_marker(sc, runner.sumo_binary())
+    marker = connection.loads_ok_marker(sc, connection.sumo_binary())
     assert marker is not None and marker.exists()
     # An edited route file: checked again.
     rou = sc.route_files[0]
@@ -630,8 +630,8 @@ def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytes
     sc.net_file.write_text("<net><edge id=")
     with pytest.raises(sumo.ScenarioError, match="SUMO refused to start"):
         check()
-    assert runner.loads_ok_marker(sc, runner.sumo_binary()) is not None
-    assert not runner.loads_ok_marker(sc, runner.sumo_binary()).exists()  # type: ignore[union-attr]
+    assert connection.loads_ok_marker(sc, connection.sumo_binary()) is not None
+    assert not connection.loads_ok_marker(sc, connection.sumo_binary()).exists()  # type: ignore[union-attr]
 
 
 def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -> None:
@@ -796,12 +796,12 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, make_args, expect: str
 def test_extra_sumo_options_replace_the_runners_own() -> None:
     """SUMO refuses an option given twice, so one the user passes replaces
     the runner's (with its values; negative numbers are values, not options)."""
-    from blendtrack.sumo.runner import _override_options
+    from blendtrack.sumo.connection import override_options
 
-    assert _override_options(["--no-step-log", "true", "--end", "0"], ["--no-warnings", "true", "--end", "5"]) == [
+    assert override_options(["--no-step-log", "true", "--end", "0"], ["--no-warnings", "true", "--end", "5"]) == [
         "--no-step-log", "true", "--no-warnings", "true", "--end", "5"]
-    assert _override_options(["--begin", "-5", "--no-warnings"], ["--scale", "2"]) == ["--begin", "-5", "--no-warnings", "--scale", "2"]
-    assert _override_options(["--seed", "0", "--end", "9"], ["--seed=3"]) == ["--end", "9", "--seed=3"]
+    assert override_options(["--begin", "-5", "--no-warnings"], ["--scale", "2"]) == ["--begin", "-5", "--no-warnings", "--scale", "2"]
+    assert override_options(["--seed", "0", "--end", "9"], ["--seed=3"]) == ["--end", "9", "--seed=3"]
 
 
 def test_sumo_args_reach_sumo(tmp_path: Path) -> None:

@@ -41,7 +41,9 @@ from typing import Any
 
 import numpy as np
 
-from blendtrack.sumo.runner import CONTROLLED_PARAM, RunOptions, _unit_hash, sumo_binary
+from blendtrack.sumo.connection import sumo_binary
+from blendtrack.sumo.options import RunOptions
+from blendtrack.sumo.selection import CONTROLLED_PARAM, unit_hash
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 
 #: Car-following models a baseline can use ("krauss" = as the scenario says).
@@ -157,10 +159,10 @@ def with_model(scenario: Scenario, model: str, tmp: Path) -> Scenario:
 
 
 def selector(opts: CompareOptions, scenario: Scenario, seed: int) -> Callable[[str, str], bool]:
-    """The treatment's selection rule (RunOptions / SumoRun.is_selected) as a function of (id, vType)."""
+    """The treatment's selection rule (RunOptions / Selection.is_selected) as a function of (id, vType)."""
     if opts.controlled_fraction is not None:
         frac = opts.controlled_fraction
-        return lambda vid, vtype: _unit_hash(seed, vid) < frac
+        return lambda vid, vtype: unit_hash(seed, vid) < frac
     if opts.controlled_type is not None:
         want = opts.controlled_type
         return lambda vid, vtype: vtype == want
@@ -175,7 +177,7 @@ def _output_args(sd: Path) -> list[str]:
 
 
 def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path) -> None:
-    """Plain SUMO with the options the runner uses (runner.SumoRun._command with fcd and ssm)."""
+    """Plain SUMO with the options the runner uses (SumoConnection.command with fcd and ssm)."""
     sd = out / "sumo"
     sd.mkdir(parents=True, exist_ok=True)
     cmd = [sumo_binary(False), "-c", str(scenario.sumocfg), "--seed", str(seed),

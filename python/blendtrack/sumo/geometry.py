@@ -526,3 +526,44 @@ def route_geometry(
         stops=[(smoothed(st[0]), st[1], st[2], st[3], st[4], smoothed(st[5]) if math.isfinite(st[5]) else st[5]) for st in stops],
         edges=tuple(edges),
     )
+
+
+def body_segment(veh: Any, vid: str) -> tuple[np.ndarray, float]:
+    """A vehicle's body as SUMO has it: its centreline from the back to the
+    front point (2 x 2) and its half width (from SUMO's front point, angle,
+    length and width)."""
+    x, y = veh.getPosition(vid)
+    a = math.radians(float(veh.getAngle(vid)))
+    length = float(veh.getLength(vid))
+    ux, uy = math.sin(a), math.cos(a)  # SUMO's angle: clockwise from north
+    return np.array([[x - length * ux, y - length * uy], [x, y]]), 0.5 * float(veh.getWidth(vid))
+
+
+def segments_distance(p: np.ndarray, q: np.ndarray) -> float:
+    """Smallest distance between the polylines ``p`` and ``q`` (n x 2 each):
+    zero where two segments cross, else the smallest of the end point to
+    segment distances."""
+    if len(p) == 0 or len(q) == 0:
+        return math.inf
+    if len(p) == 1:
+        p = np.vstack([p, p])
+    if len(q) == 1:
+        q = np.vstack([q, q])
+    a, b = p[:-1][:, None, :], p[1:][:, None, :]
+    c, d = q[:-1][None, :, :], q[1:][None, :, :]
+
+    def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+    d1, d2 = cross(b - a, c - a), cross(b - a, d - a)
+    d3, d4 = cross(d - c, a - c), cross(d - c, b - c)
+    if np.any((d1 * d2 < 0) & (d3 * d4 < 0)):
+        return 0.0
+
+    def point_seg(pt: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
+        e = s1 - s0
+        den = np.maximum(np.sum(e * e, axis=-1), 1e-12)
+        t = np.clip(np.sum((pt - s0) * e, axis=-1) / den, 0.0, 1.0)
+        return np.hypot(*np.moveaxis(s0 + t[..., None] * e - pt, -1, 0))
+
+    return float(min(point_seg(a, c, d).min(), point_seg(b, c, d).min(), point_seg(c, a, b).min(), point_seg(d, a, b).min()))

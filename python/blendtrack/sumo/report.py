@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from blendtrack.sumo.runner import RunResult, VehicleRecord
+from blendtrack.sumo.records import RunResult, VehicleRecord
 
 #: The columns of vehicles.csv, in order (more may follow).
 VEHICLE_COLUMNS = (
