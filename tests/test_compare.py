@@ -13,8 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.stats
 
 from blendtrack import cli
+from blendtrack.reporting import mean_ci
 from blendtrack.sumo import compare
 from blendtrack.sumo.selection import unit_hash
 
@@ -98,7 +100,7 @@ def test_report_numbers_equal_the_csv(study: Path) -> None:
         treat = [np.mean([t for _, t in v]) for v in per_seed.values()]
         diff = [t - b for b, t in zip(base, treat)]
         m = float(np.mean(diff))
-        half = compare.t975(len(diff) - 1) * float(np.std(diff, ddof=1)) / math.sqrt(len(diff))
+        half = float(scipy.stats.t.ppf(0.975, len(diff) - 1)) * float(np.std(diff, ddof=1)) / math.sqrt(len(diff))
         cells = table[f"{label} (per controlled vehicle)"]
         expected = [float(np.mean(base)), float(np.mean(treat)), m]
         for got, want in zip(cells[1:4], expected):
@@ -180,3 +182,17 @@ def test_idm_baseline_rewrites_every_vtype(tmp_path: Path) -> None:
     assert models and set(models.values()) == {"IDM"}
     compare.run_baseline(sc, 0, 5.0, tmp_path / "run")
     assert (tmp_path / "run" / "sumo" / "tripinfo.xml").exists()
+
+
+def test_mean_ci_of_two_values_in_closed_form() -> None:
+    """With one degree of freedom Student's t is the Cauchy distribution, so
+    its 97.5 % quantile is tan(0.475 pi); for two values the interval is the
+    mean plus or minus that times half their difference."""
+    m, lo, hi = mean_ci([1.0, 4.0])
+    half = math.tan(0.475 * math.pi) * 3.0 / 2.0
+    assert m == 2.5
+    assert lo == pytest.approx(2.5 - half, rel=1e-12) and hi == pytest.approx(2.5 + half, rel=1e-12)
+    # NaN values are left out; one value has no interval, none no mean.
+    m1, lo1, hi1 = mean_ci([7.0, math.nan])
+    assert m1 == 7.0 and math.isnan(lo1) and math.isnan(hi1)
+    assert all(math.isnan(x) for x in mean_ci([]))

@@ -17,7 +17,8 @@ import pytest
 
 import blendtrack
 from blendtrack import sumo
-from blendtrack.sumo.report import VEHICLE_COLUMNS, fcd_lateral_accel
+from blendtrack.sumo.outputs import fcd_lateral_accel
+from blendtrack.sumo.report import VEHICLE_COLUMNS
 from blendtrack.sumo.runner import RunOptions, SumoRun
 
 REPO = Path(__file__).resolve().parents[1]
@@ -69,6 +70,60 @@ def test_rural_loop_tracks_lanes_within_comfort(rural: tuple[Path, sumo.RunResul
     # Our own controlled vehicles, measured the same way from SUMO's FCD, stay below it too.
     autos = [a for vid, (a, _) in lat.items() if vid.startswith("auto")]
     assert max(autos) < comfort + 0.3, max(autos)
+
+
+def test_sumo_output_readers_agree_with_a_plain_xml_read(rural: tuple[Path, sumo.RunResult]) -> None:
+    """sumolib's fast FCD parser (attributes matched in SUMO's order) and its
+    tripinfo parser give what a plain ElementTree walk of the files gives."""
+    from blendtrack.sumo.outputs import read_fcd, read_tripinfo
+
+    out, _ = rural
+    tracks = read_fcd(out / "sumo" / "fcd.xml")
+    rows: dict[str, list[tuple[float, float, float, float, float, float, str, str]]] = {}
+    for step in ET.parse(out / "sumo" / "fcd.xml").getroot().iter("timestep"):
+        for v in step.iter("vehicle"):
+            rows.setdefault(v.get("id", ""), []).append((float(step.get("time", "")), float(v.get("x", "")), float(v.get("y", "")),
+                                                        float(v.get("angle", "")), float(v.get("speed", "")), float(v.get("pos", "")),
+                                                        v.get("lane", ""), v.get("type", "")))
+    assert len(rows) >= 10 and set(tracks) == set(rows)
+    for vid, series in rows.items():
+        tr = tracks[vid]
+        cols = list(zip(*series))
+        for got, want in zip((tr.t, tr.x, tr.y, tr.angle, tr.speed, tr.pos), cols[:6]):
+            assert got.tolist() == list(want), vid
+        assert tr.lane == list(cols[6]) and {tr.vtype} == set(cols[7])
+
+
+def test_tripinfo_ssm_and_statistics_readers(tmp_path: Path) -> None:
+    """The tripinfo, SSM and statistic readers on small files of SUMO's
+    formats, values known: emissions in mg become g, an unfinished trip
+    (arrival -1) has not arrived, a conflict counts when its minimum TTC is
+    under 3 s or its maximum DRAC over 3 m/s^2 ("NA": not measured)."""
+    from blendtrack.sumo.outputs import read_ssm_conflicts, read_statistics, read_tripinfo
+
+    (tmp_path / "tripinfo.xml").write_text(
+        '<tripinfos>\n'
+        '    <tripinfo id="a" depart="0.00" arrival="61.50" duration="61.50" timeLoss="3.25">\n'
+        '        <emissions CO2_abs="125000.5" fuel_abs="40000.0"/>\n'
+        '    </tripinfo>\n'
+        '    <tripinfo id="b" depart="10.00" arrival="-1" duration="90.00" timeLoss="7.00"/>\n'
+        '</tripinfos>\n')
+    trips = read_tripinfo(tmp_path / "tripinfo.xml")
+    assert trips["a"] == {"duration": 61.5, "time_loss": 3.25, "arrived": 1.0, "co2_g": 125.0005, "fuel_g": 40.0}
+    b = trips["b"]
+    assert (b["duration"], b["time_loss"], b["arrived"]) == (90.0, 7.0, 0.0) and math.isnan(b["co2_g"])
+    (tmp_path / "ssm.xml").write_text(
+        '<SSMLog>\n'
+        '    <conflict begin="1" end="2" ego="a" foe="b"><minTTC time="1" value="2.50"/><maxDRAC time="1" value="1.0"/></conflict>\n'
+        '    <conflict begin="3" end="4" ego="a" foe="c"><minTTC time="NA" value="NA"/><maxDRAC time="3" value="3.50"/></conflict>\n'
+        '    <conflict begin="5" end="6" ego="b" foe="c"><minTTC time="5" value="4.00"/><maxDRAC time="5" value="2.0"/></conflict>\n'
+        '</SSMLog>\n')
+    assert read_ssm_conflicts(tmp_path / "ssm.xml") == 2
+    assert math.isnan(read_ssm_conflicts(tmp_path / "missing.xml"))
+    (tmp_path / "statistics.xml").write_text(
+        '<statistics>\n    <vehicles loaded="9" inserted="9" running="1" waiting="0"/>\n'
+        '    <teleports total="4" jam="4" yield="0" wrongLane="0"/>\n    <safety collisions="2" emergencyStops="0"/>\n</statistics>\n')
+    assert read_statistics(tmp_path / "statistics.xml") == (2, 4)
 
 
 def test_rural_loop_outputs_and_plots(rural: tuple[Path, sumo.RunResult]) -> None:

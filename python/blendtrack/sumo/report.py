@@ -10,7 +10,6 @@ import csv
 import json
 import math
 import os
-import xml.etree.ElementTree as ET
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -108,41 +107,6 @@ def write_json(data: dict[str, Any], path: Path) -> None:
         f.write("\n")
 
     _atomic_write(path, write)
-
-
-def fcd_lateral_accel(
-    fcd_file: Path, dt_s: float, window_s: float = 1.0, skip_internal: bool = True
-) -> dict[str, tuple[float, str]]:
-    """Largest lateral acceleration of every vehicle in an FCD file.
-
-    ``a_lat = v * dpsi/dt`` with the heading change taken over ``window_s``
-    (it smooths the heading steps where lane shapes meet). Returns
-    ``{vehicle id: (max |a_lat| in m/s^2, lane where it happened)}``; samples
-    on junction lanes are skipped by default (SUMO limits turn speeds there).
-    """
-    k = max(1, round(window_s / dt_s))
-    hist: dict[str, list[tuple[float, float, str]]] = {}
-    best: dict[str, tuple[float, str]] = {}
-    for _, el in ET.iterparse(fcd_file, events=("end",)):
-        if el.tag != "vehicle":
-            if el.tag == "timestep":
-                el.clear()
-            continue
-        vid = el.get("id", "")
-        angle = float(el.get("angle", "nan"))
-        speed = float(el.get("speed", "nan"))
-        lane = el.get("lane", "")
-        h = hist.setdefault(vid, [])
-        h.append((angle, speed, lane))
-        if len(h) > k:
-            a0, _, lane0 = h.pop(0)
-            if skip_internal and (lane.startswith(":") or lane0.startswith(":")):
-                continue
-            dpsi = (angle - a0 + 180.0) % 360.0 - 180.0
-            a_lat = abs(speed * math.radians(dpsi) / (k * dt_s))
-            if a_lat > best.get(vid, (-1.0, ""))[0]:
-                best[vid] = (a_lat, lane)
-    return best
 
 
 def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
