@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import html as html_lib
 import math
 import re
 import subprocess
@@ -62,7 +63,11 @@ def test_outputs_exist_and_are_complete(study: Path) -> None:
     html = (study / "report.html").read_text()
     assert html.rstrip().endswith("</html>")
     assert html.count("data:image/png;base64,") == 4, "four plots embedded"
-    assert "src='speed" not in html, "self-contained: no image files referenced"
+    sources = re.findall(r"src=[\"']([^\"']*)", html)
+    assert len(sources) == 4 and all(src.startswith("data:image/png;base64,") for src in sources), "self-contained"
+    # The page's summary table says what report.md's does.
+    cells = re.findall(r"<tr><td>(.*?)</td><td>(.*?)</td><td>(.*?)</td><td>(.*?)</td><td>(.*?)</td><td>(.*?)</td></tr>", html)
+    assert {html_lib.unescape(c[0]): [html_lib.unescape(x) for x in c[1:]] for c in cells} == _table(study)
     assert not list(study.glob(".partial-*")), "no work folder left"
     assert len(_table(study)) == len(compare.VEHICLE_METRICS) + len(compare.NETWORK_METRICS)
     rows = _rows(study)
