@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import subprocess
@@ -58,8 +59,18 @@ def test_sim_backward_stanley_on_a_circle_with_a_config_file(tmp_path: Path) -> 
     cfg.write_text("[controller]\nstanley_gain = 2.0\n[vehicle]\nwheelbase_m = 3.0\n")
     r = _cli("sim", "--track", "circle:40", "--controller", "stanley", "--direction", "backward", "--speed", "1", "--offset", "1", "--duration", "40", "--config", str(cfg), "--out", str(tmp_path / "o"))
     assert r.returncode == 0, r.stderr
-    frame_head = (tmp_path / "o" / "timeseries.csv").read_text().splitlines()[1]
-    assert float(frame_head.split(",")[4]) <= 0.0  # v < 0: backwards
+    with (tmp_path / "o" / "timeseries.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert all(float(r["v_mps"]) <= 0.0 for r in rows)  # never forwards
+    # It really moves, body first: from rest at 1 m/s^2 to 1 m/s, then 39 s at
+    # 1 m/s is 39.5 m; the displacement points against the heading.
+    assert float(rows[-1]["distance_m"]) > 0.9 * 39.5
+    a, b = rows[-101], rows[-1]
+    dx, dy = float(b["x_m"]) - float(a["x_m"]), float(b["y_m"]) - float(a["y_m"])
+    th = float(b["theta_rad"])
+    assert dx * math.cos(th) + dy * math.sin(th) < -0.9 * math.hypot(dx, dy)
+    # And it tracks the circle it was put 1 m off.
+    assert abs(float(rows[-1]["lateral_error_m"])) < 0.1
 
 
 @needs_nuerburgring

@@ -27,6 +27,12 @@ __all__ = [
     "stopping_accel",
     "Fleet",
     "RouteFleet",
+    "polyline_arc_lengths",
+    "polyline_resample",
+    "polyline_smooth",
+    "polyline_blend",
+    "polyline_join",
+    "polyline_distance",
 ]
 
 __version__: str
@@ -306,3 +312,25 @@ class RouteFleet:
     def __len__(self) -> int: ...
 
 def stopping_accel(v_mps: float, gap_m: float, v_l_mps: float, s0_m: float, tau_s: float, b_f_mps2: float, b_l_mps2: float) -> float: ...
+
+def polyline_arc_lengths(points: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+def polyline_resample(
+    points: npt.NDArray[np.float64], spacing_m: float
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float]: ...
+def polyline_smooth(points: npt.NDArray[np.float64], sigma_pts: float) -> npt.NDArray[np.float64]: ...
+def polyline_blend(
+    source: npt.NDArray[np.float64],
+    target: npt.NDArray[np.float64],
+    spacing_m: float,
+    start_m: float | None = None,
+    length_m: float | None = None,
+) -> tuple[
+    npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64], float, float
+]: ...
+def polyline_join(
+    pieces: list[tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], bool, float]],
+    sigma_pts: float,
+    near_m: float,
+    min_run: int,
+) -> dict[str, Any]: ...
+def polyline_distance(p: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> float: ...

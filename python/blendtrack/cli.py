@@ -374,7 +374,7 @@ def _add_driving_options(parser: argparse.ArgumentParser) -> None:
         action="store_true",
         help="controlled vehicles also change lanes where their route does not need it, when SUMO's lane-change model "
         "would (to overtake, keep right, make room) and the target lane has room (default: only the changes the route needs). "
-        "Experimental: tried on 2 networks and 3 seeds; on the urban grid it adds teleports (README, known limits)",
+        "Experimental: tried on 2 networks and 3 seeds; on the urban grid it adds teleports (docs/safety.md)",
     )
 
 
@@ -492,7 +492,7 @@ def _add_batch_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> Non
             "each swept parameter with its 95% CI over seeds, the best parameter set per metric, failed runs). A run "
             "that fails, crashes or times out is recorded as such and the others go on; --resume runs again only what "
             "has no ok record. Exit code: 0 when every run is ok, 1 when some failed, 2 on bad input, 130 on Ctrl-C. "
-            "See the README, section 'Batch sweeps', for the file format and for running on a Dask cluster."
+            "See docs/batch.md for the file format and for running on a Dask cluster."
         ),
     )
     b.add_argument("sweep", metavar="SWEEP.toml", help="the sweep file")

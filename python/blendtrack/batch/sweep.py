@@ -1,6 +1,6 @@
 """Sweep files: parsing, validation and expansion into runs.
 
-A sweep file is TOML (see the README's "Batch sweeps" section)::
+A sweep file is TOML (see docs/batch.md)::
 
     kind = "sumo"                         # "sim", "sumo" or "compare"
     scenarios = ["rural_loop", "urban_grid"]

@@ -23,6 +23,12 @@ The shapes are resampled every ``spacing_m`` metres (SUMO shapes have long
 straight pieces and short kinks at lane joints); the core's path smooths the
 tangent heading between vertices, so curvature is continuous enough for the
 controllers.
+
+The geometry itself (resampling, arc lengths, the smoothstep blend of a lane
+change, the Gaussian smoothing, the pieces' runs near their lanes, segment
+distances) is the Rust core's ``blendtrack::polyline``, one call per piece or
+per route; this module keeps what is SUMO's: lane choice, lane shapes and
+positions, junctions, carriageway widths and SUMO's angle.
 """
 
 from __future__ import annotations
@@ -35,6 +41,13 @@ from typing import Any
 import numpy as np
 
 from blendtrack import PathError
+from blendtrack._blendtrack import (
+    polyline_arc_lengths,
+    polyline_blend,
+    polyline_distance,
+    polyline_join,
+    polyline_resample,
+)
 
 #: Track points within this distance (m) of their lane's centreline count as
 #: near it (on a curve of radius R the smoothing alone moves the track about
@@ -92,19 +105,9 @@ class RouteGeometry:
     length_m: float = 0.0
 
 
-def _arc(shape: np.ndarray) -> np.ndarray:
-    """Cumulative arc length at each point of a polyline."""
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(shape, axis=0).T))])
-
-
-def _resample(shape: np.ndarray, spacing_m: float) -> np.ndarray:
-    """Points evenly spaced along ``shape``, at most ``spacing_m`` apart, from
-    its first point to its last (even spacing keeps the smoothing, which
-    counts in points, the same everywhere along the track)."""
-    s = _arc(shape)
-    n = max(1, int(np.ceil(s[-1] / spacing_m)))
-    t = np.linspace(0.0, s[-1], n + 1)
-    return np.column_stack([np.interp(t, s, shape[:, 0]), np.interp(t, s, shape[:, 1])])
+def _shape(lane: Any) -> np.ndarray:
+    """A lane's centreline as SUMO has it, (N, 2)."""
+    return np.asarray(lane.getShape(), dtype=float)
 
 
 def _best_connection(conns: list[Any]) -> Any:
@@ -125,11 +128,6 @@ def _via_chain(net: Any, conn: Any) -> list[Any]:
         nxt = [c for c in lane.getOutgoing() if c.getViaLaneID()]
         via = nxt[0].getViaLaneID() if nxt else ""
     return lanes
-
-
-def _smoothstep(u: np.ndarray) -> np.ndarray:
-    u = np.clip(u, 0.0, 1.0)
-    return u * u * (3.0 - 2.0 * u)
 
 
 @dataclass
@@ -160,12 +158,15 @@ class _Piece:
 def _lane_piece(
     lane: Any, spacing_m: float, shape: np.ndarray | None = None, lane_s: np.ndarray | None = None, on_lane: bool = True
 ) -> _Piece:
-    """A piece on ``lane``: its whole resampled centreline (``shape`` None),
-    or the given points with their arc lengths along the lane's shape."""
-    raw = np.asarray(lane.getShape(), dtype=float)
+    """A piece on ``lane``: its whole centreline resampled every
+    ``spacing_m`` (``shape`` None; even spacing keeps the smoothing, which
+    counts in points, the same everywhere along the track), or the given
+    points with their arc lengths along the lane's shape."""
+    raw = _shape(lane)
     if shape is None or lane_s is None:
-        shape = _resample(raw, spacing_m)
-        lane_s = _arc(shape)
+        shape, lane_s, raw_length = polyline_resample(raw, spacing_m)
+    else:
+        raw_length = float(polyline_arc_lengths(raw)[-1])
     return _Piece(
         shape,
         0.5 * float(lane.getWidth()),
@@ -175,7 +176,7 @@ def _lane_piece(
         float(lane.getSpeed()),
         float(lane.getLength()),
         lane_s,
-        max(float(_arc(raw)[-1]), 1e-9),
+        max(raw_length, 1e-9),
         on_lane,
     )
 
@@ -216,17 +217,8 @@ def _lane_change_pieces(
     ``start_m + length_m`` along ``a`` (default: over the whole edge), as up
     to three pieces: on ``a`` before the change, the change itself (off both
     centrelines; on ``b`` for SUMO), on ``b`` after it."""
-    sa = _resample(np.asarray(a.getShape(), dtype=float), spacing_m)
-    sb = np.asarray(b.getShape(), dtype=float)
-    # Sample b at the same relative arc length as each point of a.
-    da, db = _arc(sa), _arc(sb)
-    total = max(da[-1], 1e-9)
-    tb = da / total * db[-1]
-    pb = np.column_stack([np.interp(tb, db, sb[:, 0]), np.interp(tb, db, sb[:, 1])])
-    start = 0.0 if start_m is None else min(max(start_m, 0.0), total)
-    length = (total - start) if length_m is None else max(length_m, 1e-6)
-    w = _smoothstep((da - start) / length)
-    pts = (1.0 - w[:, None]) * sa + w[:, None] * pb
+    # a resampled, each point blended with b's at the same relative arc length.
+    pts, w, da, tb, start, length = polyline_blend(_shape(a), _shape(b), spacing_m, start_m, length_m)
     before, after = w <= 0.0, w >= 1.0
     middle = ~(before | after)
     out = []
@@ -356,32 +348,6 @@ def _pieces(
     return out, None
 
 
-def _runs(far: np.ndarray, min_len: int) -> list[tuple[int, int]]:
-    """[a, b) ranges of equal ``far``, covering it in order, after a stretch
-    of near points shorter than ``min_len`` is counted as far (a piece only
-    gets cheap moves where it is near for a while)."""
-    far = far.copy()
-    cuts = [0, *(np.flatnonzero(far[1:] != far[:-1]) + 1).tolist(), len(far)]
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        if not far[a] and b - a < min_len:
-            far[a:b] = True
-    cuts = [0, *(np.flatnonzero(far[1:] != far[:-1]) + 1).tolist(), len(far)]
-    return list(zip(cuts[:-1], cuts[1:]))
-
-
-def _smooth(points: np.ndarray, sigma_pts: float) -> np.ndarray:
-    """Gaussian smoothing along the polyline (ends held in place)."""
-    if sigma_pts <= 0 or len(points) < 5:
-        return points
-    half = int(np.ceil(3 * sigma_pts))
-    k = np.exp(-0.5 * (np.arange(-half, half + 1) / sigma_pts) ** 2)
-    k /= k.sum()
-    padded = np.pad(points, ((half, half), (0, 0)), mode="edge")
-    out = np.column_stack([np.convolve(padded[:, i], k, mode="valid") for i in range(2)])
-    out[0], out[-1] = points[0], points[-1]
-    return out
-
-
 def route_geometry(
     net: Any,
     edges: Sequence[str],
@@ -408,122 +374,56 @@ def route_geometry(
     """
     if len(edges) == 0:
         raise PathError("the route has no edges")
-    pts: list[np.ndarray] = []
-    wid: list[np.ndarray] = []
-    starts: list[float] = []
-    kept: list[_Piece] = []
-    #: Per kept piece: the range of its points in the concatenated track
-    #: (from the point it shares with the piece before, where its lane
-    #: starts, if any), and their arc lengths along the lane's shape.
-    first: list[int] = []
-    end: list[int] = []
-    lane_s: list[np.ndarray] = []
-    stops: list[tuple[float, str, int, bool, str, float]] = []
-    s = 0.0
-    n_pts = 0
-    last: np.ndarray | None = None
     pieces, pending = _pieces(net, edges, start_lane_index, spacing_m, defer_changes, change)
-    for pc in pieces:
-        shape, ls = pc.shape, pc.lane_s
-        shared = last is not None and np.hypot(*(shape[0] - last)) < 1e-6
-        if shared:
-            shape = shape[1:]
-        if len(shape) == 0:
-            continue
-        # The stop line is where the incoming lane ends, before any gap to
-        # the junction lane's first point (about 1 m in the urban grid).
-        end_of_previous = s
-        if shared:
-            # The lane starts at the point it shares with the piece before.
-            starts.append(s)
-            first.append(n_pts - 1)
-        if last is not None:
-            s += float(np.hypot(*(shape[0] - last)))
-        if not shared:
-            starts.append(s)
-            first.append(n_pts)
-        lane_s.append(ls)
-        kept.append(pc)
+    # Joined and smoothed in Rust: the pieces end to end (sharing a point
+    # where one starts at the last one's end), the Gaussian smoothing, and
+    # each piece cut where the track comes near its lane's centreline or
+    # leaves it (the smoothing rounds the kinks at lane joints over a few
+    # metres), every arc length on the smoothed track (the path the
+    # controllers follow). The runs near the centreline can be handed to
+    # SUMO as (lane, position): where a lane starts (its position 0) the
+    # run starts at that point of the track.
+    joined = polyline_join(
+        [(pc.shape, pc.lane_s, pc.on_lane, pc.length_m / pc.shape_length_m) for pc in pieces],
+        smoothing_m / spacing_m,
+        NEAR_LANE_M,
+        MIN_RUN_PTS,
+    )
+    wid: list[np.ndarray] = []
+    stops: list[tuple[float, str, int, bool, str, float]] = []
+    for k, i in enumerate(joined["kept"]):
+        pc, n = pieces[i], joined["kept_points"][k]
         if pc.tls is not None:
-            stops.append((end_of_previous, pc.tls[0], pc.tls[1], pc.tls[2], pc.lane, math.inf))
+            # The stop line is where the incoming lane ends, before any gap
+            # to the junction lane's first point (about 1 m in the urban grid).
+            stops.append((joined["before_s"][k], pc.tls[0], pc.tls[1], pc.tls[2], pc.lane, math.inf))
         if not pc.lane.startswith(":"):
             # The junction is left here: the exit of its entry and of its
             # internal junction, if any.
             for j in range(len(stops) - 1, -1, -1):
                 if not math.isinf(stops[j][5]):
                     break
-                stops[j] = (*stops[j][:5], s)
-        s += float(_arc(shape)[-1])
-        pts.append(shape)
+                stops[j] = (*stops[j][:5], joined["entry_s"][k])
         if pc.widths is not None:
-            wid.append(pc.widths[len(pc.widths) - len(shape):] + border_margin_m)
+            wid.append(pc.widths[len(pc.widths) - n:] + border_margin_m)
         else:
-            wid.append(np.full((len(shape), 2), pc.half_width_m + border_margin_m))
-        n_pts += len(shape)
-        end.append(n_pts)
-        last = shape[-1]
-    raw = np.concatenate(pts)
-    points = _smooth(raw, smoothing_m / spacing_m)
-    # Arc lengths on the smoothed track (the path the controllers follow):
-    # every arc length above is mapped through the points.
-    s_raw, s_sm = _arc(raw), _arc(points)
-
-    def smoothed(x: float) -> float:
-        return float(np.interp(x, s_raw, s_sm))
-
-    starts = [smoothed(x) for x in starts]
-
-    # Each piece is cut where the track comes near its lane's centreline or
-    # leaves it (the smoothing rounds the kinks at lane joints over a few
-    # metres): the runs near it can be handed to SUMO as (lane, position).
-    out: dict[str, list[Any]] = {k: [] for k in ("start", "k", "lane_pos", "scale", "offset")}
-    for k, pc in enumerate(kept):
-        i0, i1 = first[k], end[k]
-        # The smoothed point's offset from the raw one (which lies on the
-        # lane), across and along the lane's local direction.
-        r = raw[i0:i1]
-        tangent = np.gradient(r, axis=0) if len(r) > 1 else np.array([[1.0, 0.0]])
-        tangent /= np.maximum(np.hypot(*tangent.T), 1e-12)[:, None]
-        shift = points[i0:i1] - r
-        across = tangent[:, 0] * shift[:, 1] - tangent[:, 1] * shift[:, 0]
-        along = (tangent * shift).sum(axis=1)
-        pos = (lane_s[k] + along) * (pc.length_m / pc.shape_length_m)
-        dev = np.abs(across) if pc.on_lane else np.full(i1 - i0, math.inf)
-        for a, b in _runs(dev > NEAR_LANE_M, MIN_RUN_PTS):
-            # The run's points, and the one after it (the track between them is the run's too).
-            c = min(b + 1, i1 - i0)
-            ds = s_sm[i0 + c - 1] - s_sm[i0 + a]
-            rise = pos[c - 1] - pos[a]
-            scale = float(rise / ds) if ds > 1e-9 and rise > 0 else pc.length_m / pc.shape_length_m
-            start, lane_pos = (starts[k] if a == 0 else float(s_sm[i0 + a])), float(pos[a])
-            if a == 0 and lane_s[k][0] == 0.0:
-                # Where the lane starts, along the track (the smoothing shifts
-                # the points along a little): lane position 0 there, so a
-                # vehicle SUMO carries over the lane's start lands in place.
-                start, lane_pos = start - lane_pos / scale, 0.0
-                if out["start"]:
-                    start = max(start, out["start"][-1] + 1e-6)
-            out["start"].append(start)
-            out["k"].append(k)
-            out["lane_pos"].append(lane_pos)
-            out["scale"].append(scale)
-            out["offset"].append(float(dev[a:b].max()))
-    pieces_of = [kept[k] for k in out["k"]]
+            wid.append(np.full((n, 2), pc.half_width_m + border_margin_m))
+    pieces_of = [pieces[i] for i in joined["run_piece"]]
     return RouteGeometry(
-        points=points,
+        points=joined["points"],
         widths=np.concatenate(wid),
-        piece_start_s=np.array(out["start"]),
+        piece_start_s=joined["run_start_s"],
         piece_lane=[p.lane for p in pieces_of],
         piece_edge=[p.edge for p in pieces_of],
         piece_index=[p.index for p in pieces_of],
         piece_speed=np.array([p.speed_mps for p in pieces_of]),
-        piece_lane_pos=np.array(out["lane_pos"]),
-        piece_scale=np.array(out["scale"]),
+        piece_lane_pos=joined["run_station"],
+        piece_scale=joined["run_scale"],
         piece_lane_length=np.array([p.length_m for p in pieces_of]),
-        piece_offset=np.array(out["offset"]),
-        length_m=float(s_sm[-1]),
+        piece_offset=joined["run_offset"],
+        length_m=joined["length_m"],
         pending_change=pending,
-        stops=[(smoothed(st[0]), st[1], st[2], st[3], st[4], smoothed(st[5]) if math.isfinite(st[5]) else st[5]) for st in stops],
+        stops=stops,
         edges=tuple(edges),
     )
 
@@ -542,28 +442,8 @@ def body_segment(veh: Any, vid: str) -> tuple[np.ndarray, float]:
 def segments_distance(p: np.ndarray, q: np.ndarray) -> float:
     """Smallest distance between the polylines ``p`` and ``q`` (n x 2 each):
     zero where two segments cross, else the smallest of the end point to
-    segment distances."""
-    if len(p) == 0 or len(q) == 0:
-        return math.inf
-    if len(p) == 1:
-        p = np.vstack([p, p])
-    if len(q) == 1:
-        q = np.vstack([q, q])
-    a, b = p[:-1][:, None, :], p[1:][:, None, :]
-    c, d = q[:-1][None, :, :], q[1:][None, :, :]
-
-    def cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-    d1, d2 = cross(b - a, c - a), cross(b - a, d - a)
-    d3, d4 = cross(d - c, a - c), cross(d - c, b - c)
-    if np.any((d1 * d2 < 0) & (d3 * d4 < 0)):
-        return 0.0
-
-    def point_seg(pt: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
-        e = s1 - s0
-        den = np.maximum(np.sum(e * e, axis=-1), 1e-12)
-        t = np.clip(np.sum((pt - s0) * e, axis=-1) / den, 0.0, 1.0)
-        return np.hypot(*np.moveaxis(s0 + t[..., None] * e - pt, -1, 0))
-
-    return float(min(point_seg(a, c, d).min(), point_seg(b, c, d).min(), point_seg(c, a, b).min(), point_seg(d, a, b).min()))
+    segment distances; infinite when either is empty (Rust,
+    ``blendtrack::polyline::segments_distance``). Raises
+    :class:`blendtrack.PathError` for a coordinate that is not finite."""
+    a, b = np.asarray(p, dtype=float), np.asarray(q, dtype=float)
+    return polyline_distance(a.reshape(0, 2) if a.size == 0 else a, b.reshape(0, 2) if b.size == 0 else b)

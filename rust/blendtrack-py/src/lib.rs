@@ -13,7 +13,9 @@
 //!
 //! Modules: `errors` (exception classes and core-error mapping), `path`
 //! (`Path`), `config` (`ControllerConfig`, `VehicleParams`, `load_config`),
-//! `sim` (`simulate`, `compute_metrics`), `fleet` (`Fleet`).
+//! `sim` (`simulate`, `compute_metrics`), `fleet` (`Fleet`), `geometry`
+//! (polyline functions: arc length, resampling, smoothing, blends, joined
+//! tracks, segment distances).
 
 // `!(x >= y)` is a NaN guard on purpose (see the core crate).
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -23,6 +25,7 @@ use pyo3::prelude::*;
 mod config;
 mod errors;
 mod fleet;
+mod geometry;
 mod path;
 mod sim;
 mod traffic;
@@ -42,5 +45,6 @@ fn _blendtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sim::stopping_accel, m)?)?;
     m.add_class::<fleet::Fleet>()?;
     m.add_class::<traffic::RouteFleet>()?;
+    geometry::register(m)?;
     Ok(())
 }

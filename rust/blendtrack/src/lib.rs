@@ -29,6 +29,7 @@ pub mod lateral;
 pub mod longitudinal;
 pub mod metrics;
 pub mod path;
+pub mod polyline;
 pub mod sim;
 pub mod traffic;
 pub mod vehicle;

@@ -6,12 +6,19 @@ use blendtrack::*;
 use nalgebra::Point2;
 use std::path::PathBuf;
 
-fn shared_track(name: &str) -> Path {
-    let file = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../../../shared/tracks")
-        .join(name);
-    Path::from_tum_csv(&file, true)
-        .unwrap_or_else(|e| panic!("the shared tracks must sit beside the repo: {e}"))
+/// A race track of ../shared/tracks, or `None` (with a message saying the
+/// test is skipped) when that folder is not beside the repository. A track
+/// that is there but does not load is a failure, not a skip.
+fn shared_track(name: &str) -> Option<Path> {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/tracks");
+    if !dir.is_dir() {
+        eprintln!(
+            "skipped: {} is missing (keep ../shared beside the repo)",
+            dir.display()
+        );
+        return None;
+    }
+    Some(Path::from_tum_csv(&dir.join(name), true).unwrap_or_else(|e| panic!("{name}: {e}")))
 }
 
 /// Deterministic pseudo-random numbers in [-1, 1).
@@ -28,7 +35,9 @@ impl Lcg {
 
 #[test]
 fn nuerburgring_loads_with_widths() {
-    let p = shared_track("Nuerburgring.csv");
+    let Some(p) = shared_track("Nuerburgring.csv") else {
+        return;
+    };
     assert_eq!(p.len_points(), 1029);
     assert!(p.is_closed());
     assert!((p.length() - 5144.0).abs() < 30.0, "lap {}", p.length());
@@ -44,7 +53,9 @@ fn windowed_projection_equals_brute_force_near_the_track() {
         "Hockenheim.csv",
         "Zandvoort.csv",
     ] {
-        let p = shared_track(name);
+        let Some(p) = shared_track(name) else {
+            return;
+        };
         let mut rng = Lcg(7);
         let mut hint = 0.0;
         let mut checked = 0;
@@ -162,7 +173,9 @@ fn hinted_projection_catches_up_after_a_long_jump() {
 fn ray_cast_window_equals_full_scan_on_real_tracks() {
     let cfg = ControllerConfig::default();
     for name in ["Nuerburgring.csv", "Monza.csv"] {
-        let p = shared_track(name);
+        let Some(p) = shared_track(name) else {
+            return;
+        };
         let cor = Corridor::new(&p, &cfg);
         let mut rng = Lcg(11);
         let mut s = 0.0;
@@ -192,7 +205,9 @@ fn ray_cast_window_equals_full_scan_on_real_tracks() {
 #[test]
 fn track_widths_drive_the_borders() {
     // The TUM widths (about 7.4 m a side) are used unless disabled.
-    let p = shared_track("Nuerburgring.csv");
+    let Some(p) = shared_track("Nuerburgring.csv") else {
+        return;
+    };
     let with = Corridor::new(&p, &ControllerConfig::default());
     let without = Corridor::new(
         &p,

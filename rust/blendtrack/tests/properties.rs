@@ -165,9 +165,23 @@ proptest! {
     }
 
     #[test]
-    fn garbage_toml_is_an_error_not_a_panic(text in ".{0,200}") {
-        let _ = Config::from_toml_str(&text, "fuzz.toml");
-        let _ = ExperimentSet::from_toml_str(&text, "fuzz.toml");
-        let _ = Path::from_tum_str(&text, "fuzz.csv", true);
+    fn garbage_toml_is_an_error_naming_the_file_or_a_valid_config(text in ".{0,200}") {
+        // Whatever the text, no panic; an accepted config is a valid one (it
+        // round-trips through TOML), a refused one says which file it was.
+        match Config::from_toml_str(&text, "fuzz.toml") {
+            Ok(c) => {
+                prop_assert!(c.controller.validate().is_ok());
+                let again = Config::from_toml_str(&c.to_toml_string(), "again.toml");
+                prop_assert!(again.is_ok(), "{again:?}");
+            }
+            Err(e) => prop_assert!(e.to_string().contains("fuzz.toml"), "{e}"),
+        }
+        if let Err(e) = ExperimentSet::from_toml_str(&text, "fuzz.toml") {
+            prop_assert!(e.to_string().contains("fuzz.toml") || e.to_string().contains("test["), "{e}");
+        }
+        match Path::from_tum_str(&text, "fuzz.csv", true) {
+            Ok(p) => prop_assert!(p.length().is_finite() && p.length() > 0.0),
+            Err(e) => prop_assert!(e.to_string().contains("fuzz.csv"), "{e}"),
+        }
     }
 }

@@ -1,0 +1,264 @@
+//! A track joined from pieces of polylines, each piece lying along a
+//! reference line of its own (a lane's centreline, say) with a station (arc
+//! length along that line) at each point.
+//!
+//! [`join`] puts the pieces end to end (a piece whose first point is within
+//! 1 micrometre of the previous piece's last point shares it), smooths the
+//! whole with a Gaussian ([`super::smooth`]) to round the kinks where pieces
+//! meet, and measures everything on the smoothed track: where each piece
+//! starts, and the stretches ("runs") of each piece where the smoothed track
+//! stays within `near_m` of the unsmoothed points, with the station at their
+//! start and the station gained per metre of track. A caller can then map a
+//! position on the track to (piece, station) and back on a run that is near.
+
+use super::{
+    arc_lengths, check_points, distance, gradient, interp, length, smooth, PolylineError, Xy,
+};
+
+/// One piece of a chain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChainPiece {
+    /// Points (at least 1).
+    pub points: Vec<Xy>,
+    /// Station along the piece's reference line at each point.
+    pub station: Vec<f64>,
+    /// False where the points leave the reference line (no run is near).
+    pub on_reference: bool,
+    /// Station units per metre of the points (the fallback rate of a run).
+    pub station_scale: f64,
+}
+
+/// A stretch of one piece, near its reference line or away from it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Run {
+    /// Index of the piece in the input.
+    pub piece: usize,
+    /// Arc length along the smoothed track where the run starts.
+    pub start_s: f64,
+    /// Station at the run's start.
+    pub station: f64,
+    /// Station gained per metre of smoothed track over the run.
+    pub scale: f64,
+    /// Largest distance between the smoothed track and the piece's points
+    /// over the run (infinite for a piece off its reference line).
+    pub offset: f64,
+}
+
+/// The joined, smoothed track. Per kept piece (a piece that adds at least
+/// one point; `kept` lists their input indices) the arc lengths are on the
+/// smoothed track.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Chain {
+    /// The smoothed points.
+    pub points: Vec<Xy>,
+    /// Total arc length of the smoothed track.
+    pub length: f64,
+    /// Input index of each kept piece.
+    pub kept: Vec<usize>,
+    /// How many points each kept piece adds (its first is dropped when shared).
+    pub kept_points: Vec<usize>,
+    /// Where each kept piece starts (at its shared point, if any).
+    pub start_s: Vec<f64>,
+    /// Where the track before each kept piece ends (before any gap).
+    pub before_s: Vec<f64>,
+    /// Where each kept piece's first own point is (after any gap).
+    pub entry_s: Vec<f64>,
+    /// The runs, in order along the track.
+    pub runs: Vec<Run>,
+}
+
+/// Unsmoothed concatenation: points, and per kept piece (input index, range
+/// of its points from the shared one, points added, raw start, before, entry).
+struct Joined {
+    raw: Vec<Xy>,
+    kept: Vec<(usize, usize, usize, usize)>,
+    start: Vec<f64>,
+    before: Vec<f64>,
+    entry: Vec<f64>,
+}
+
+fn concatenate(pieces: &[ChainPiece]) -> Joined {
+    let mut j = Joined {
+        raw: Vec::new(),
+        kept: Vec::new(),
+        start: Vec::new(),
+        before: Vec::new(),
+        entry: Vec::new(),
+    };
+    let mut s = 0.0;
+    for (index, pc) in pieces.iter().enumerate() {
+        let last = j.raw.last().copied();
+        let shared = last.is_some_and(|l| distance(l, pc.points[0]) < 1e-6);
+        let own = if shared {
+            &pc.points[1..]
+        } else {
+            &pc.points[..]
+        };
+        if own.is_empty() {
+            continue;
+        }
+        j.before.push(s);
+        let n = j.raw.len();
+        if shared {
+            j.start.push(s);
+        }
+        if let Some(l) = last {
+            s += distance(l, own[0]);
+        }
+        if !shared {
+            j.start.push(s);
+        }
+        j.entry.push(s);
+        s += length(own);
+        j.kept.push((
+            index,
+            if shared { n - 1 } else { n },
+            n + own.len(),
+            own.len(),
+        ));
+        j.raw.extend_from_slice(own);
+    }
+    j
+}
+
+/// `[a, b)` ranges of equal `far`, in order, after any stretch of near
+/// points shorter than `min_len` is counted as far.
+pub fn runs(far: &[bool], min_len: usize) -> Vec<(usize, usize)> {
+    let cuts = |f: &[bool]| -> Vec<(usize, usize)> {
+        let mut out = Vec::new();
+        let mut a = 0;
+        for i in 1..=f.len() {
+            if i == f.len() || f[i] != f[i - 1] {
+                out.push((a, i));
+                a = i;
+            }
+        }
+        out
+    };
+    let mut f = far.to_vec();
+    for (a, b) in cuts(far) {
+        if !f[a] && b - a < min_len {
+            f[a..b].iter_mut().for_each(|v| *v = true);
+        }
+    }
+    cuts(&f)
+}
+
+/// Distance across (signed, left of the tangent positive) and along the
+/// tangent from each raw point to its smoothed point.
+fn offsets(raw: &[Xy], smoothed: &[Xy]) -> Vec<(f64, f64)> {
+    gradient(raw)
+        .iter()
+        .zip(raw.iter().zip(smoothed))
+        .map(|(t, (r, p))| {
+            let norm = t[0].hypot(t[1]);
+            let norm = if norm > 1e-12 || norm.is_nan() {
+                norm
+            } else {
+                1e-12
+            };
+            let (tx, ty) = (t[0] / norm, t[1] / norm);
+            let (sx, sy) = (p[0] - r[0], p[1] - r[1]);
+            (tx * sy - ty * sx, tx * sx + ty * sy)
+        })
+        .collect()
+}
+
+fn check(pieces: &[ChainPiece]) -> Result<(), PolylineError> {
+    if pieces.is_empty() {
+        return Err(PolylineError::TooFewPoints {
+            what: "chain (pieces)",
+            needed: 1,
+            got: 0,
+        });
+    }
+    for pc in pieces {
+        check_points("chain piece", &pc.points, 1)?;
+        if pc.station.len() != pc.points.len() {
+            return Err(PolylineError::Count {
+                what: "chain piece stations",
+                got: pc.station.len(),
+                expected: pc.points.len(),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Joins `pieces` (see the module docs), smoothing with a Gaussian of
+/// `sigma_pts` points; a run is near where the smoothed track is within
+/// `near_m` of the piece's points for at least `min_run` points.
+pub fn join(
+    pieces: &[ChainPiece],
+    sigma_pts: f64,
+    near_m: f64,
+    min_run: usize,
+) -> Result<Chain, PolylineError> {
+    check(pieces)?;
+    let j = concatenate(pieces);
+    let points = smooth(&j.raw, sigma_pts);
+    let (s_raw, s_sm) = (arc_lengths(&j.raw), arc_lengths(&points));
+    let on_smoothed = |x: f64| interp(x, &s_raw, &s_sm);
+    let start_s: Vec<f64> = j.start.iter().map(|&x| on_smoothed(x)).collect();
+    let mut out: Vec<Run> = Vec::new();
+    for (k, &(index, i0, i1, _)) in j.kept.iter().enumerate() {
+        let pc = &pieces[index];
+        let off = offsets(&j.raw[i0..i1], &points[i0..i1]);
+        let pos: Vec<f64> = off
+            .iter()
+            .zip(&pc.station)
+            .map(|(o, st)| (st + o.1) * pc.station_scale)
+            .collect();
+        let dev: Vec<f64> = off
+            .iter()
+            .map(|o| {
+                if pc.on_reference {
+                    o.0.abs()
+                } else {
+                    f64::INFINITY
+                }
+            })
+            .collect();
+        let far: Vec<bool> = dev.iter().map(|&d| d > near_m).collect();
+        for (a, b) in runs(&far, min_run) {
+            let c = (b + 1).min(i1 - i0);
+            let ds = s_sm[i0 + c - 1] - s_sm[i0 + a];
+            let rise = pos[c - 1] - pos[a];
+            let scale = if ds > 1e-9 && rise > 0.0 {
+                rise / ds
+            } else {
+                pc.station_scale
+            };
+            let (mut start, mut station) = (if a == 0 { start_s[k] } else { s_sm[i0 + a] }, pos[a]);
+            if a == 0 && pc.station[0] == 0.0 {
+                // Where the reference line starts, along the smoothed track.
+                start -= station / scale;
+                station = 0.0;
+                if let Some(prev) = out.last() {
+                    let floor = prev.start_s + 1e-6;
+                    start = if floor > start { floor } else { start };
+                }
+            }
+            let offset = dev[a..b]
+                .iter()
+                .fold(f64::NEG_INFINITY, |m, &d| if d > m { d } else { m });
+            out.push(Run {
+                piece: index,
+                start_s: start,
+                station,
+                scale,
+                offset,
+            });
+        }
+    }
+    Ok(Chain {
+        length: s_sm[s_sm.len() - 1],
+        kept: j.kept.iter().map(|k| k.0).collect(),
+        kept_points: j.kept.iter().map(|k| k.3).collect(),
+        start_s,
+        before_s: j.before.iter().map(|&x| on_smoothed(x)).collect(),
+        entry_s: j.entry.iter().map(|&x| on_smoothed(x)).collect(),
+        runs: out,
+        points,
+    })
+}

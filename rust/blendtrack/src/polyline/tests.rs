@@ -1,0 +1,301 @@
+//! Closed-form checks of the polyline geometry.
+
+use super::chain::{join, runs, ChainPiece};
+use super::*;
+
+fn close(a: f64, b: f64, tol: f64) -> bool {
+    (a - b).abs() <= tol
+}
+
+fn circle_arc(radius: f64, n: usize, dtheta: f64) -> Vec<Xy> {
+    (0..n)
+        .map(|i| {
+            let th = i as f64 * dtheta;
+            [radius * th.cos(), radius * th.sin()]
+        })
+        .collect()
+}
+
+#[test]
+fn arc_lengths_of_a_straight_and_of_a_3_4_5_corner() {
+    let line: Vec<Xy> = (0..5).map(|i| [2.0 * i as f64, 0.0]).collect();
+    assert_eq!(arc_lengths(&line), vec![0.0, 2.0, 4.0, 6.0, 8.0]);
+    assert_eq!(
+        arc_lengths(&[[0.0, 0.0], [3.0, 4.0], [3.0, 10.0]]),
+        vec![0.0, 5.0, 11.0]
+    );
+    assert_eq!(length(&[[0.0, 0.0], [3.0, 4.0], [3.0, 10.0]]), 11.0);
+    assert_eq!(arc_lengths(&[]), Vec::<f64>::new());
+    assert_eq!(length(&[[1.0, 1.0]]), 0.0);
+}
+
+#[test]
+fn interp_matches_the_linear_formula_and_its_edge_rules() {
+    let xp = [0.0, 1.0, 1.0, 3.0];
+    let fp = [0.0, 10.0, 20.0, 40.0];
+    assert_eq!(interp(0.5, &xp, &fp), 5.0);
+    // A repeated abscissa: the later value, and interpolation from it.
+    assert_eq!(interp(1.0, &xp, &fp), 20.0);
+    assert_eq!(interp(2.0, &xp, &fp), 30.0);
+    assert_eq!(interp(-1.0, &xp, &fp), 0.0);
+    assert_eq!(interp(9.0, &xp, &fp), 40.0);
+    assert_eq!(interp(3.0, &xp, &fp), 40.0);
+    assert!(interp(f64::NAN, &xp, &fp).is_nan());
+}
+
+#[test]
+fn resample_spaces_points_evenly_along_a_straight() {
+    let pts = resample(&[[0.0, 0.0], [10.0, 0.0]], 3.0).unwrap();
+    assert_eq!(
+        pts,
+        vec![[0.0, 0.0], [2.5, 0.0], [5.0, 0.0], [7.5, 0.0], [10.0, 0.0]]
+    );
+    // Shorter than the spacing: just the two ends.
+    assert_eq!(
+        resample(&[[0.0, 0.0], [0.0, 0.5]], 1.0).unwrap(),
+        vec![[0.0, 0.0], [0.0, 0.5]]
+    );
+}
+
+#[test]
+fn resample_of_an_arc_keeps_points_on_its_chords_at_equal_arc_steps() {
+    let r = 30.0;
+    let src = circle_arc(r, 31, std::f64::consts::PI / 60.0);
+    let total = length(&src);
+    let pts = resample(&src, 1.0).unwrap();
+    let n = (total / 1.0).ceil() as usize;
+    assert_eq!(pts.len(), n + 1);
+    assert_eq!(pts[0], src[0]);
+    assert_eq!(pts[n], src[30]);
+    // Points on a chord of the circle lie between R cos(dtheta/2) and R from the centre.
+    let inner = r * (std::f64::consts::PI / 120.0).cos();
+    for p in &pts {
+        let d = p[0].hypot(p[1]);
+        assert!(d <= r + 1e-9 && d >= inner - 1e-9, "{d}");
+    }
+    // Each step is total/n along the source polyline (equal on a chord).
+    let s = arc_lengths(&pts);
+    for w in s.windows(2) {
+        assert!(w[1] - w[0] <= total / n as f64 + 1e-9);
+    }
+}
+
+#[test]
+fn resample_rejects_empty_single_nan_and_bad_spacing() {
+    assert!(matches!(
+        resample(&[], 1.0),
+        Err(PolylineError::TooFewPoints { got: 0, .. })
+    ));
+    assert!(matches!(
+        resample(&[[1.0, 2.0]], 1.0),
+        Err(PolylineError::TooFewPoints { got: 1, .. })
+    ));
+    let e = resample(&[[0.0, 0.0], [f64::NAN, 1.0]], 1.0).unwrap_err();
+    assert!(
+        matches!(e, PolylineError::NonFinite { index: 1, .. }),
+        "{e}"
+    );
+    assert!(e.to_string().contains("point 1"));
+    assert!(resample(&[[0.0, 0.0], [1.0, 1.0]], 0.0).is_err());
+    assert!(resample(&[[0.0, 0.0], [1.0, 1.0]], f64::NAN).is_err());
+}
+
+#[test]
+fn smoothstep_closed_form() {
+    assert_eq!(smoothstep(-1.0), 0.0);
+    assert_eq!(smoothstep(0.0), 0.0);
+    assert_eq!(smoothstep(0.5), 0.5);
+    assert_eq!(smoothstep(1.0), 1.0);
+    assert_eq!(smoothstep(2.0), 1.0);
+    assert!(close(smoothstep(0.25), 3.0 / 16.0 - 2.0 / 64.0, 1e-15));
+}
+
+#[test]
+fn gaussian_kernel_is_normalised_symmetric_and_gaussian() {
+    let sigma = 1.5;
+    let k = gaussian_kernel(sigma);
+    assert_eq!(k.len(), 11);
+    assert!(close(k.iter().sum::<f64>(), 1.0, 1e-15));
+    for i in 0..k.len() {
+        assert_eq!(k[i], k[k.len() - 1 - i]);
+        let x = i as f64 - 5.0;
+        assert!(close(
+            k[i] / k[5],
+            (-0.5 * x * x / (sigma * sigma)).exp(),
+            1e-14
+        ));
+    }
+}
+
+#[test]
+fn smoothing_keeps_a_straight_and_shrinks_a_circle_by_the_kernel_s_cosine_sum() {
+    let line: Vec<Xy> = (0..30).map(|i| [i as f64, 0.5 * i as f64]).collect();
+    let sm = smooth(&line, 1.5);
+    for i in 6..24 {
+        assert!(close(sm[i][0], line[i][0], 1e-12) && close(sm[i][1], line[i][1], 1e-12));
+    }
+    assert_eq!(sm[0], line[0]);
+    assert_eq!(sm[29], line[29]);
+    // An evenly sampled circle: interior points stay on a circle of radius
+    // R * sum_j k_j cos(j * dtheta).
+    let (r, dth) = (30.0, 1.0 / 30.0);
+    let circle = circle_arc(r, 60, dth);
+    let sm = smooth(&circle, 1.5);
+    let k = gaussian_kernel(1.5);
+    let factor: f64 = k
+        .iter()
+        .enumerate()
+        .map(|(j, kj)| kj * ((j as f64 - 5.0) * dth).cos())
+        .sum();
+    for p in &sm[6..54] {
+        assert!(close(p[0].hypot(p[1]), r * factor, 1e-9));
+    }
+    // About sigma^2 / (2 R) inward (1.5 m spacing^2 ... here spacing 1 m).
+    assert!(close(r - r * factor, 1.5 * 1.5 / (2.0 * r), 2e-3));
+    // Too short or no smoothing: unchanged.
+    assert_eq!(smooth(&circle[..4], 1.5), circle[..4].to_vec());
+    assert_eq!(smooth(&circle, 0.0), circle);
+}
+
+#[test]
+fn gradient_is_the_central_difference_inside_and_one_sided_at_the_ends() {
+    let parabola: Vec<Xy> = (0..6).map(|i| [i as f64, (i * i) as f64]).collect();
+    let g = gradient(&parabola);
+    assert_eq!(g[0], [1.0, 1.0]);
+    for (i, gi) in g.iter().enumerate().take(5).skip(1) {
+        assert_eq!(*gi, [1.0, 2.0 * i as f64]);
+    }
+    assert_eq!(g[5], [1.0, 9.0]);
+    assert_eq!(gradient(&[[3.0, 4.0]]), vec![[1.0, 0.0]]);
+}
+
+#[test]
+fn blend_moves_between_parallel_lines_by_smoothstep() {
+    let a = [[0.0, 0.0], [100.0, 0.0]];
+    let b = [[0.0, 3.5], [100.0, 3.5]];
+    let bl = blend(&a, &b, 1.0, Some(20.0), Some(50.0)).unwrap();
+    assert_eq!(bl.points.len(), 101);
+    for (i, p) in bl.points.iter().enumerate() {
+        let w = smoothstep((i as f64 - 20.0) / 50.0);
+        assert!(close(p[0], i as f64, 1e-12));
+        assert!(close(p[1], 3.5 * w, 1e-12), "{i}: {p:?}");
+        assert_eq!(bl.weight[i], w);
+    }
+    assert_eq!(bl.points[45][1], 1.75);
+    // Over the whole line by default; the second line may be longer (same fraction).
+    let c = [[0.0, 3.5], [200.0, 3.5]];
+    let bl = blend(&a, &c, 10.0, None, None).unwrap();
+    assert_eq!(bl.weight[0], 0.0);
+    assert_eq!(bl.weight[10], 1.0);
+    assert_eq!(bl.points[10], [200.0, 3.5]);
+    assert_eq!(bl.s_onto[5], 100.0);
+    assert!(blend(&a, &[[0.0, 0.0]], 1.0, None, None).is_err());
+}
+
+#[test]
+fn segment_distances_closed_forms() {
+    let d = segments_distance(&[[0.0, 0.0], [1.0, 0.0]], &[[2.0, 1.0], [3.0, 1.0]]).unwrap();
+    assert_eq!(d, 2f64.sqrt());
+    let d = segments_distance(&[[0.0, 0.0], [10.0, 0.0]], &[[3.0, 2.0], [7.0, 2.0]]).unwrap();
+    assert_eq!(d, 2.0);
+    // Crossing: zero; touching ends are not a crossing but at distance zero.
+    assert_eq!(
+        segments_distance(&[[0.0, -1.0], [0.0, 1.0]], &[[-1.0, 0.0], [1.0, 0.0]]).unwrap(),
+        0.0
+    );
+    assert_eq!(
+        segments_distance(&[[0.0, 0.0], [1.0, 0.0]], &[[1.0, 0.0], [1.0, 5.0]]).unwrap(),
+        0.0
+    );
+    // A single point to a polyline: distance to its nearest segment.
+    let d = segments_distance(&[[5.0, 4.0]], &[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]]).unwrap();
+    assert_eq!(d, 4.0);
+    assert_eq!(
+        point_segment_distance([3.0, 4.0], [0.0, 0.0], [0.0, 0.0]),
+        5.0
+    );
+    assert_eq!(
+        segments_distance(&[], &[[0.0, 0.0]]).unwrap(),
+        f64::INFINITY
+    );
+    assert!(segments_distance(&[[0.0, f64::NAN]], &[[0.0, 0.0]]).is_err());
+}
+
+#[test]
+fn runs_merge_short_near_stretches_into_far() {
+    let f = [true, false, false, true, true, false, false, false, false];
+    assert_eq!(runs(&f, 4), vec![(0, 5), (5, 9)]);
+    assert_eq!(runs(&f, 2), vec![(0, 1), (1, 3), (3, 5), (5, 9)]);
+    assert_eq!(runs(&[false; 3], 4), vec![(0, 3)]);
+}
+
+fn piece(points: Vec<Xy>, scale: f64) -> ChainPiece {
+    let station = arc_lengths(&points);
+    ChainPiece {
+        points,
+        station,
+        on_reference: true,
+        station_scale: scale,
+    }
+}
+
+#[test]
+fn chain_of_straight_pieces_shares_points_and_keeps_stations() {
+    let a: Vec<Xy> = (0..=10).map(|i| [i as f64, 0.0]).collect();
+    let b: Vec<Xy> = (10..=20).map(|i| [i as f64, 0.0]).collect();
+    // A piece after a 1 m gap (evenly spaced, so the smoothing moves nothing).
+    let c: Vec<Xy> = (21..=30).map(|i| [i as f64, 0.0]).collect();
+    let ch = join(&[piece(a, 1.0), piece(b, 2.0), piece(c, 1.0)], 1.5, 0.06, 4).unwrap();
+    assert_eq!(ch.points.len(), 11 + 10 + 10);
+    assert_eq!(ch.length, 30.0);
+    assert_eq!(ch.kept, vec![0, 1, 2]);
+    assert_eq!(ch.kept_points, vec![11, 10, 10]);
+    assert_eq!(ch.start_s, vec![0.0, 10.0, 21.0]);
+    assert_eq!(ch.before_s, vec![0.0, 10.0, 20.0]);
+    assert_eq!(ch.entry_s, vec![0.0, 11.0, 21.0]);
+    assert_eq!(ch.runs.len(), 3);
+    for (run, (start, scale)) in ch.runs.iter().zip([(0.0, 1.0), (10.0, 2.0), (21.0, 1.0)]) {
+        assert!(
+            close(run.start_s, start, 1e-12) && close(run.scale, scale, 1e-12),
+            "{run:?}"
+        );
+        assert_eq!(run.station, 0.0);
+        assert!(run.offset < 1e-12);
+    }
+}
+
+#[test]
+fn chain_splits_a_piece_where_smoothing_rounds_a_corner() {
+    let a: Vec<Xy> = (0..=20).map(|i| [i as f64, 0.0]).collect();
+    let b: Vec<Xy> = (0..=20).map(|i| [20.0, i as f64]).collect();
+    let ch = join(&[piece(a, 1.0), piece(b, 1.0)], 1.5, 0.06, 4).unwrap();
+    assert_eq!(ch.kept_points, vec![21, 20]);
+    // Near, away (the corner), near again on each side: the corner's run is far.
+    let of_a: Vec<_> = ch.runs.iter().filter(|r| r.piece == 0).collect();
+    assert_eq!(of_a.len(), 2, "{:?}", ch.runs);
+    assert!(of_a[0].offset <= 0.06 && of_a[1].offset > 0.06);
+    assert!(ch.length < 40.0 && ch.length > 39.0);
+    // An off-reference piece is one far run.
+    let mut off = piece((0..5).map(|i| [i as f64, 0.0]).collect(), 1.0);
+    off.on_reference = false;
+    let ch = join(&[off], 1.5, 0.06, 4).unwrap();
+    assert_eq!(ch.runs.len(), 1);
+    assert_eq!(ch.runs[0].offset, f64::INFINITY);
+}
+
+#[test]
+fn chain_rejects_empty_pieces_and_mismatched_stations() {
+    assert!(join(&[], 1.5, 0.06, 4).is_err());
+    let mut p = piece(vec![[0.0, 0.0], [1.0, 0.0]], 1.0);
+    p.station.pop();
+    assert!(matches!(
+        join(&[p], 1.5, 0.06, 4),
+        Err(PolylineError::Count {
+            got: 1,
+            expected: 2,
+            ..
+        })
+    ));
+    let p = piece(vec![], 1.0);
+    assert!(join(&[p], 1.5, 0.06, 4).is_err());
+}
