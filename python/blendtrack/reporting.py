@@ -1,6 +1,6 @@
 """What the reports of ``blendtrack compare`` and ``blendtrack batch`` share:
 the mean with its 95 % Student-t confidence interval (scipy), how a number
-is printed, and HTML pages from the package's jinja2 templates
+is printed, figures written to files, and HTML pages from the package's jinja2 templates
 (``blendtrack/templates/``), self-contained (images embedded)."""
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ import numpy as np
 def mean_ci(values: Sequence[float], confidence: float = 0.95) -> tuple[float, float, float]:
     """Mean and two-sided ``confidence`` Student-t interval of the values
     (NaN values left out; NaN bounds with fewer than 2 values)."""
-    from scipy.stats import t
+    from scipy.stats import t  # type: ignore[import-untyped]
 
     x = np.array([v for v in values if v == v], dtype=float)
     if len(x) == 0:
@@ -35,6 +35,16 @@ def fmt(x: float) -> str:
     if not isinstance(x, (int, float)) or not math.isfinite(x):
         return "n/a"
     return f"{x:.4g}"
+
+
+def save_figure(fig: Any, file: Path, dpi: int) -> Path:
+    """Lays out, writes and closes a matplotlib figure; returns its file."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(file, dpi=dpi)
+    plt.close(fig)
+    return file
 
 
 def png_data_uri(file: Path) -> str:

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from blendtrack.reporting import save_figure
 from blendtrack.sumo.records import RunResult, VehicleRecord
 
 #: The columns of vehicles.csv, in order (more may follow).
@@ -124,10 +125,7 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
     ax.set_xlabel("|lateral error| of the control point (m)")
     ax.set_ylabel("samples (every 10th step)")
     ax.set_title("Lateral error of controlled vehicles")
-    fig.tight_layout()
-    files.append(out / "lateral_error_hist.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(save_figure(fig, out / "lateral_error_hist.png", 110))
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     if len(samples):
@@ -142,10 +140,7 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
     ax.set_xlabel("|path curvature| (1/m)")
     ax.set_ylabel("speed (m/s)")
     ax.set_title("Speed against curvature")
-    fig.tight_layout()
-    files.append(out / "speed_vs_curvature.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(save_figure(fig, out / "speed_vs_curvature.png", 110))
 
     if result.trajectories:
         vid, (traj, ref) = next(iter(result.trajectories.items()))
@@ -157,8 +152,5 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
         ax.set_ylabel("y (m)")
         ax.set_title(f"Trajectory of {vid} against its lane")
         ax.legend(loc="best", fontsize=8)
-        fig.tight_layout()
-        files.append(out / "trajectory.png")
-        fig.savefig(files[-1], dpi=110)
-        plt.close(fig)
+        files.append(save_figure(fig, out / "trajectory.png", 110))
     return files

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from blendtrack.reporting import fmt, render_html
+from blendtrack.reporting import fmt, render_html, save_figure
 from blendtrack.sumo.compare.metrics import NETWORK_METRICS, VEHICLE_METRICS, SeedResult, summarise
 from blendtrack.sumo.compare.runs import MODELS, CompareOptions
 from blendtrack.sumo.outputs import LAT_WINDOW_S, lateral_series
@@ -73,16 +73,6 @@ def plain_text(table: list[dict[str, Any]], results: list[SeedResult], model: st
 
 
 # --------------------------------------------------------------------- plots
-def _save(fig: Any, title: str, file: Path) -> tuple[str, Path]:
-    """Lays out, writes and closes ``fig``: (its title in the report, its file)."""
-    import matplotlib.pyplot as plt
-
-    fig.tight_layout()
-    fig.savefig(file, dpi=100)
-    plt.close(fig)
-    return title, file
-
-
 def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> list[tuple[str, Path]]:
     import matplotlib
 
@@ -122,7 +112,7 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
     ax.set_ylabel("speed (m/s)")
     ax.set_title("Speed against curvature, controlled vehicles and their baseline twins")
     ax.legend(fontsize=8)
-    files.append(_save(fig, "Speed against curvature", out / "speed_vs_curvature.png"))
+    files.append(("Speed against curvature", save_figure(fig, out / "speed_vs_curvature.png", 100)))
 
     fig, ax = plt.subplots(figsize=(7, 4))
     allv = [np.concatenate(lat[w]) if lat[w] else np.zeros(0) for w in ("baseline", "treatment")]
@@ -138,7 +128,7 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
     ax.set_ylabel("density")
     ax.set_title("Lateral acceleration of the paired vehicles")
     ax.legend(fontsize=8)
-    files.append(_save(fig, "Lateral acceleration histograms", out / "lateral_accel_hist.png"))
+    files.append(("Lateral acceleration histograms", save_figure(fig, out / "lateral_accel_hist.png", 100)))
 
     r0 = results[0]
     counts: dict[str, int] = {}
@@ -161,7 +151,7 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
             ax.set_xlabel("time (s)")
         axes[0].set_ylabel(f"position on lane {lane} (m)")
         fig.suptitle(f"Time-space diagram of the busiest lane ({lane}); red = controlled in the treatment")
-        files.append(_save(fig, "Time-space diagram", out / "time_space.png"))
+        files.append(("Time-space diagram", save_figure(fig, out / "time_space.png", 100)))
 
     # The tightest curve any controlled vehicle drove (largest driven-path
     # curvature in the treatment), and the same vehicle there in the baseline.
@@ -199,7 +189,7 @@ def _plots(results: list[SeedResult], out: Path, dt: float, comfort: float) -> l
         ax2.set_ylabel("speed (m/s)")
         ax2.set_title("speed in the same window (first pass)")
         ax2.legend(fontsize=8)
-        files.append(_save(fig, f"Trajectory of {vid} in a tight curve", out / "curve_trajectory.png"))
+        files.append((f"Trajectory of {vid} in a tight curve", save_figure(fig, out / "curve_trajectory.png", 100)))
     return files
 
 
