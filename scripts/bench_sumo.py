@@ -27,7 +27,7 @@ from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 from blendtrack.sumo import RunOptions, SumoRun, resolve_scenario
-from blendtrack.sumo.runner import sumo_binary
+from blendtrack.sumo.connection import sumo_binary
 
 
 def plain(scenario_name: str, end: float, scale: float) -> dict[str, Any]:
@@ -37,7 +37,7 @@ def plain(scenario_name: str, end: float, scale: float) -> dict[str, Any]:
     # Timed from SUMO's start, as the plugin's run is (which also checks the
     # scenario in a child SUMO and reads the network for the lane geometry).
     t0 = time.perf_counter()
-    # The options the plugin gives SUMO (SumoRun._command): the same seed
+    # The options the plugin gives SUMO (SumoConnection.command): the same seed
     # (another one is other traffic), no logs.
     libsumo.start([sumo_binary(), "-c", str(scenario.sumocfg), "--seed", "0", "--end", str(end), "--scale", str(scale),
                    "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"])

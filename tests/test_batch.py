@@ -175,7 +175,7 @@ def test_local_batch_writes_one_record_and_one_row_per_run(local_batch: tuple[Pa
 
 
 def test_summary_has_plots_best_sets_and_numbers_from_the_records(local_batch: tuple[Path, Path, subprocess.CompletedProcess[str]]) -> None:
-    from blendtrack.sumo.compare import fmt, mean_ci
+    from blendtrack.reporting import fmt, mean_ci
 
     _, out, _ = local_batch
     summary = (out / "summary.md").read_text()

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import html as html_lib
 import math
 import re
 import subprocess
@@ -13,10 +14,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.stats
 
 from blendtrack import cli
+from blendtrack.reporting import mean_ci
 from blendtrack.sumo import compare
-from blendtrack.sumo.runner import _unit_hash
+from blendtrack.sumo.selection import unit_hash
 
 FRACTION = 0.3
 SEEDS = 2
@@ -60,7 +63,11 @@ def test_outputs_exist_and_are_complete(study: Path) -> None:
     html = (study / "report.html").read_text()
     assert html.rstrip().endswith("</html>")
     assert html.count("data:image/png;base64,") == 4, "four plots embedded"
-    assert "src='speed" not in html, "self-contained: no image files referenced"
+    sources = re.findall(r"src=[\"']([^\"']*)", html)
+    assert len(sources) == 4 and all(src.startswith("data:image/png;base64,") for src in sources), "self-contained"
+    # The page's summary table says what report.md's does.
+    cells = re.findall(r"<tr><td>(.*?)</td><td>(.*?)</td><td>(.*?)</td><td>(.*?)</td><td>(.*?)</td><td>(.*?)</td></tr>", html)
+    assert {html_lib.unescape(c[0]): [html_lib.unescape(x) for x in c[1:]] for c in cells} == _table(study)
     assert not list(study.glob(".partial-*")), "no work folder left"
     assert len(_table(study)) == len(compare.VEHICLE_METRICS) + len(compare.NETWORK_METRICS)
     rows = _rows(study)
@@ -78,7 +85,7 @@ def test_pairs_are_the_same_vehicles_in_both_runs(study: Path) -> None:
         with open(run / "treatment" / "vehicles.csv") as f:
             controlled = {r["id"] for r in csv.DictReader(f)}
         trips = ET.parse(run / "baseline" / "sumo" / "tripinfo.xml").getroot()
-        twins = {t.get("id") for t in trips.iter("tripinfo") if _unit_hash(seed, t.get("id", "")) < FRACTION}
+        twins = {t.get("id") for t in trips.iter("tripinfo") if unit_hash(seed, t.get("id", "")) < FRACTION}
         paired = {r["id"] for r in rows if int(r["seed"]) == seed}
         assert paired == controlled == twins, seed
 
@@ -98,7 +105,7 @@ def test_report_numbers_equal_the_csv(study: Path) -> None:
         treat = [np.mean([t for _, t in v]) for v in per_seed.values()]
         diff = [t - b for b, t in zip(base, treat)]
         m = float(np.mean(diff))
-        half = compare.t975(len(diff) - 1) * float(np.std(diff, ddof=1)) / math.sqrt(len(diff))
+        half = float(scipy.stats.t.ppf(0.975, len(diff) - 1)) * float(np.std(diff, ddof=1)) / math.sqrt(len(diff))
         cells = table[f"{label} (per controlled vehicle)"]
         expected = [float(np.mean(base)), float(np.mean(treat)), m]
         for got, want in zip(cells[1:4], expected):
@@ -180,3 +187,17 @@ def test_idm_baseline_rewrites_every_vtype(tmp_path: Path) -> None:
     assert models and set(models.values()) == {"IDM"}
     compare.run_baseline(sc, 0, 5.0, tmp_path / "run")
     assert (tmp_path / "run" / "sumo" / "tripinfo.xml").exists()
+
+
+def test_mean_ci_of_two_values_in_closed_form() -> None:
+    """With one degree of freedom Student's t is the Cauchy distribution, so
+    its 97.5 % quantile is tan(0.475 pi); for two values the interval is the
+    mean plus or minus that times half their difference."""
+    m, lo, hi = mean_ci([1.0, 4.0])
+    half = math.tan(0.475 * math.pi) * 3.0 / 2.0
+    assert m == 2.5
+    assert lo == pytest.approx(2.5 - half, rel=1e-12) and hi == pytest.approx(2.5 + half, rel=1e-12)
+    # NaN values are left out; one value has no interval, none no mean.
+    m1, lo1, hi1 = mean_ci([7.0, math.nan])
+    assert m1 == 7.0 and math.isnan(lo1) and math.isnan(hi1)
+    assert all(math.isnan(x) for x in mean_ci([]))

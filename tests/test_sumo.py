@@ -17,7 +17,8 @@ import pytest
 
 import blendtrack
 from blendtrack import sumo
-from blendtrack.sumo.report import VEHICLE_COLUMNS, fcd_lateral_accel
+from blendtrack.sumo.outputs import fcd_lateral_accel
+from blendtrack.sumo.report import VEHICLE_COLUMNS
 from blendtrack.sumo.runner import RunOptions, SumoRun
 
 REPO = Path(__file__).resolve().parents[1]
@@ -69,6 +70,60 @@ def test_rural_loop_tracks_lanes_within_comfort(rural: tuple[Path, sumo.RunResul
     # Our own controlled vehicles, measured the same way from SUMO's FCD, stay below it too.
     autos = [a for vid, (a, _) in lat.items() if vid.startswith("auto")]
     assert max(autos) < comfort + 0.3, max(autos)
+
+
+def test_sumo_output_readers_agree_with_a_plain_xml_read(rural: tuple[Path, sumo.RunResult]) -> None:
+    """sumolib's fast FCD parser (attributes matched in SUMO's order) and its
+    tripinfo parser give what a plain ElementTree walk of the files gives."""
+    from blendtrack.sumo.outputs import read_fcd, read_tripinfo
+
+    out, _ = rural
+    tracks = read_fcd(out / "sumo" / "fcd.xml")
+    rows: dict[str, list[tuple[float, float, float, float, float, float, str, str]]] = {}
+    for step in ET.parse(out / "sumo" / "fcd.xml").getroot().iter("timestep"):
+        for v in step.iter("vehicle"):
+            rows.setdefault(v.get("id", ""), []).append((float(step.get("time", "")), float(v.get("x", "")), float(v.get("y", "")),
+                                                        float(v.get("angle", "")), float(v.get("speed", "")), float(v.get("pos", "")),
+                                                        v.get("lane", ""), v.get("type", "")))
+    assert len(rows) >= 10 and set(tracks) == set(rows)
+    for vid, series in rows.items():
+        tr = tracks[vid]
+        cols = list(zip(*series))
+        for got, want in zip((tr.t, tr.x, tr.y, tr.angle, tr.speed, tr.pos), cols[:6]):
+            assert got.tolist() == list(want), vid
+        assert tr.lane == list(cols[6]) and {tr.vtype} == set(cols[7])
+
+
+def test_tripinfo_ssm_and_statistics_readers(tmp_path: Path) -> None:
+    """The tripinfo, SSM and statistic readers on small files of SUMO's
+    formats, values known: emissions in mg become g, an unfinished trip
+    (arrival -1) has not arrived, a conflict counts when its minimum TTC is
+    under 3 s or its maximum DRAC over 3 m/s^2 ("NA": not measured)."""
+    from blendtrack.sumo.outputs import read_ssm_conflicts, read_statistics, read_tripinfo
+
+    (tmp_path / "tripinfo.xml").write_text(
+        '<tripinfos>\n'
+        '    <tripinfo id="a" depart="0.00" arrival="61.50" duration="61.50" timeLoss="3.25">\n'
+        '        <emissions CO2_abs="125000.5" fuel_abs="40000.0"/>\n'
+        '    </tripinfo>\n'
+        '    <tripinfo id="b" depart="10.00" arrival="-1" duration="90.00" timeLoss="7.00"/>\n'
+        '</tripinfos>\n')
+    trips = read_tripinfo(tmp_path / "tripinfo.xml")
+    assert trips["a"] == {"duration": 61.5, "time_loss": 3.25, "arrived": 1.0, "co2_g": 125.0005, "fuel_g": 40.0}
+    b = trips["b"]
+    assert (b["duration"], b["time_loss"], b["arrived"]) == (90.0, 7.0, 0.0) and math.isnan(b["co2_g"])
+    (tmp_path / "ssm.xml").write_text(
+        '<SSMLog>\n'
+        '    <conflict begin="1" end="2" ego="a" foe="b"><minTTC time="1" value="2.50"/><maxDRAC time="1" value="1.0"/></conflict>\n'
+        '    <conflict begin="3" end="4" ego="a" foe="c"><minTTC time="NA" value="NA"/><maxDRAC time="3" value="3.50"/></conflict>\n'
+        '    <conflict begin="5" end="6" ego="b" foe="c"><minTTC time="5" value="4.00"/><maxDRAC time="5" value="2.0"/></conflict>\n'
+        '</SSMLog>\n')
+    assert read_ssm_conflicts(tmp_path / "ssm.xml") == 2
+    assert math.isnan(read_ssm_conflicts(tmp_path / "missing.xml"))
+    (tmp_path / "statistics.xml").write_text(
+        '<statistics>\n    <vehicles loaded="9" inserted="9" running="1" waiting="0"/>\n'
+        '    <teleports total="4" jam="4" yield="0" wrongLane="0"/>\n    <safety collisions="2" emergencyStops="0"/>\n</statistics>\n')
+    assert read_statistics(tmp_path / "statistics.xml") == (2, 4)
 
 
 def test_rural_loop_outputs_and_plots(rural: tuple[Path, sumo.RunResult]) -> None:
@@ -139,7 +194,7 @@ def test_grid_with_every_vehicle_controlled_has_no_junction_collision(tmp_path: 
 def test_body_and_distance_to_a_path_in_closed_form() -> None:
     """A 4.5 m x 1.8 m vehicle facing east (SUMO angle 90, clockwise from
     north) with its front at (10, 0)."""
-    from blendtrack.sumo.runner import _body_segment, _segments_distance
+    from blendtrack.sumo.geometry import body_segment, segments_distance
 
     class Veh:
         def getPosition(self, vid: str) -> tuple[float, float]:
@@ -154,18 +209,18 @@ def test_body_and_distance_to_a_path_in_closed_form() -> None:
         def getWidth(self, vid: str) -> float:
             return 1.8
 
-    body, half = _body_segment(Veh(), "x")
+    body, half = body_segment(Veh(), "x")
     assert body == pytest.approx(np.array([[5.5, 0.0], [10.0, 0.0]]))
     assert half == pytest.approx(0.9)
     # A path crossing 3 m ahead of the front, from south to north.
-    assert _segments_distance(body, np.array([[13.0, -20.0], [13.0, 20.0]])) == pytest.approx(3.0)
+    assert segments_distance(body, np.array([[13.0, -20.0], [13.0, 20.0]])) == pytest.approx(3.0)
     # A path alongside, 2.9 m to the left of the centreline.
-    assert _segments_distance(body, np.array([[0.0, 2.9], [6.0, 2.9], [30.0, 2.9]])) == pytest.approx(2.9)
+    assert segments_distance(body, np.array([[0.0, 2.9], [6.0, 2.9], [30.0, 2.9]])) == pytest.approx(2.9)
     # A path through the body between its ends: they cross.
-    assert _segments_distance(body, np.array([[8.0, -5.0], [8.0, 5.0]])) == 0.0
+    assert segments_distance(body, np.array([[8.0, -5.0], [8.0, 5.0]])) == 0.0
     # Behind the back, at an angle: the back point's distance to the segment.
-    assert _segments_distance(body, np.array([[0.0, -3.0], [6.0, 3.0]])) == pytest.approx(abs(5.5 - 0.0 - 3.0) / math.sqrt(2.0))
-    assert _segments_distance(body, np.zeros((0, 2))) == math.inf
+    assert segments_distance(body, np.array([[0.0, -3.0], [6.0, 3.0]])) == pytest.approx(abs(5.5 - 0.0 - 3.0) / math.sqrt(2.0))
+    assert segments_distance(body, np.zeros((0, 2))) == math.inf
 
 
 def test_grid_waits_for_a_vehicle_standing_inside_the_junction(tmp_path: Path) -> None:
@@ -217,7 +272,7 @@ def test_obstacle_is_assumed_to_brake_like_the_vehicle_unless_set(tmp_path: Path
     def grab(key: str) -> Any:
         def hook(r: SumoRun, t: float) -> None:
             if key not in seen:
-                seen[key] = r._type_info("auto")["config"]
+                seen[key] = r.selection.type_info("auto")["config"]
         return hook
 
     run = SumoRun(sc, RunOptions(end_s=1.0, progress=False), None)
@@ -315,16 +370,16 @@ def test_the_tighter_of_two_leaders_is_the_one_the_stopping_law_brakes_harder_fo
     the other: collisions behind a vehicle giving way to a merger)."""
     run = SumoRun(sumo.resolve_scenario("highway_onramp"), RunOptions(progress=False))
     speeds = {"near": 20.0, "far": 0.0, "slow": 5.0}
-    run._get_speed = speeds.__getitem__
-    b = run._plan_decel
+    run.conn.get_speed = speeds.__getitem__
+    b = run.lanes.plan_decel
     assert 5.0 + 20.0**2 / (2 * b) > 30.0  # so the far, standing one is tighter
-    assert run._tighter_leader(("near", 5.0), ("far", 30.0)) == ("far", 30.0)
-    assert run._tighter_leader(("far", 30.0), ("near", 5.0)) == ("far", 30.0)
+    assert run.lanes.tighter_leader(("near", 5.0), ("far", 30.0)) == ("far", 30.0)
+    assert run.lanes.tighter_leader(("far", 30.0), ("near", 5.0)) == ("far", 30.0)
     # Equal speeds: the closer one.
-    assert run._tighter_leader(("slow", 12.0), ("slow", 8.0)) == ("slow", 8.0)
+    assert run.lanes.tighter_leader(("slow", 12.0), ("slow", 8.0)) == ("slow", 8.0)
     # No leader (None, or SUMO's empty answer) gives way to the other.
-    assert run._tighter_leader(None, ("near", 5.0)) == ("near", 5.0)
-    assert run._tighter_leader(("", -1.0), ("near", 5.0)) == ("near", 5.0)
+    assert run.lanes.tighter_leader(None, ("near", 5.0)) == ("near", 5.0)
+    assert run.lanes.tighter_leader(("", -1.0), ("near", 5.0)) == ("near", 5.0)
 
 
 def test_lane_change_is_given_up_when_the_room_goes(tmp_path: Path) -> None:
@@ -445,7 +500,7 @@ def test_lane_change_tracks_go_once_their_vehicle_leaves_them(tmp_path: Path) ->
     mismatches: list[tuple[float, int, int]] = []
 
     def count(r: SumoRun, t: float) -> None:
-        expected = len(r._geo_cache) + sum(1 for a in r.active.values() if a.own_track is not None)
+        expected = len(r.tracks.geo_cache) + sum(1 for a in r.active.values() if a.own_track is not None)
         if r.fleet.n_tracks != expected:
             mismatches.append((t, r.fleet.n_tracks, expected))
 
@@ -454,7 +509,7 @@ def test_lane_change_tracks_go_once_their_vehicle_leaves_them(tmp_path: Path) ->
     changes = sum(r.lane_changes for r in result.records)
     assert changes >= 30, changes
     assert mismatches[:3] == [], mismatches[:3]
-    assert run.fleet.n_tracks < len(run._geo_cache) + 10
+    assert run.fleet.n_tracks < len(run.tracks.geo_cache) + 10
 
 
 def test_tactical_lane_changes_watch_the_lane_beyond_the_target(tmp_path: Path) -> None:
@@ -493,7 +548,7 @@ def test_sumo_has_each_controlled_vehicle_where_blendtrack_has_it(tmp_path: Path
                 continue
             x, y, th, _, _ = r.fleet.state(act.slot)
             wheelbase = r.fleet.vehicle_params(act.slot).wheelbase_m
-            reach = wheelbase + max(0.5 * (r._type_info(act.record.vtype)["length"] - wheelbase), 0.0)
+            reach = wheelbase + max(0.5 * (r.selection.type_info(act.record.vtype)["length"] - wheelbase), 0.0)
             dx, dy = (p - q for p, q in zip(v.getPosition(vid), (x + reach * math.cos(th), y + reach * math.sin(th))))
             along = abs(dx * math.cos(th) + dy * math.sin(th))
             across = abs(-dx * math.sin(th) + dy * math.cos(th))
@@ -526,22 +581,22 @@ def test_leaders_read_off_lane_lists_are_the_ones_sumo_gives(tmp_path: Path) -> 
     def compare(r: SumoRun, t: float) -> None:
         if not r.active:
             return
-        r._refresh_order()
+        r.vehicles.refresh_order()
         present = set(r.sumo.vehicle.getIDList())
-        if any(vid not in present for vid in r._ids):
+        if any(vid not in present for vid in r.vehicles.ids):
             return  # arrivals are dropped after the hooks
-        lanes = r.fleet.lanes_with_followers(r._slots).tolist()
-        ask = r.fleet.leaders_on_lanes(r._slots, lanes, [r._lane_vehicles(r._lanes.name(x)) for x in lanes]).tolist()
+        lanes = r.fleet.lanes_with_followers(r.vehicles.slots).tolist()
+        ask = r.fleet.leaders_on_lanes(r.vehicles.slots, lanes, [r.conn.lane_vehicles(r.tracks.lanes.name(x)) for x in lanes]).tolist()
         listed = r.fleet.listed_leaders()
-        for i, vid in enumerate(r._ids):
-            want = r._get_leader(vid, 250.0)  # libsumo's own call, ("", -1) for none
+        for i, vid in enumerate(r.vehicles.ids):
+            want = r.conn.get_leader(vid, 250.0)  # libsumo's own call, ("", -1) for none
             if listed[i] is None:
                 assert i in ask
                 continue
             got = listed[i]
             assert got[0] == want[0] and abs(got[1] - want[1]) < 1e-6, (t, vid, got, want)
             compared[1] += 1
-        compared[0] += len(r._ids)
+        compared[0] += len(r.vehicles.ids)
 
     run.step_hooks.append(compare)
     run.run()
@@ -559,8 +614,8 @@ def test_border_margin_widens_the_virtual_borders_and_eases_the_curves(tmp_path:
         runs[margin] = (run, run.run())
     (narrow_run, narrow), (wide_run, wide) = runs[0.0], runs[3.0]
     assert wide.summary["border_margin_m"] == 3.0
-    geo_n = next(iter(narrow_run._geo_cache.values()))[0]
-    geo_w = next(iter(wide_run._geo_cache.values()))[0]
+    geo_n = next(iter(narrow_run.tracks.geo_cache.values()))[0]
+    geo_w = next(iter(wide_run.tracks.geo_cache.values()))[0]
     assert abs(float(geo_w.widths[0, 0]) - float(geo_n.widths[0, 0]) - 3.0) < 1e-12
     speed = {m: sum(r.sum_v for r in res.records) / sum(r.steps for r in res.records) for m, (_, res) in runs.items()}
     assert speed[3.0] > 1.05 * speed[0.0], speed
@@ -601,7 +656,7 @@ def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytes
     loaded again. A change to any of its files is a new check."""
     import subprocess as sp
 
-    from blendtrack.sumo import runner
+    from blendtrack.sumo import connection
 
     monkeypatch.setenv("BLENDTRACK_CACHE_DIR", str(tmp_path / "cache"))
     folder = tmp_path / "ring"
@@ -615,11 +670,11 @@ def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytes
         return real_run(cmd, *a, **k)
 
     monkeypatch.setattr(sp, "run", counting_run)
-    check = lambda: SumoRun(sc, RunOptions(progress=False), None)._check_loads()  # noqa: E731
+    check = lambda: SumoRun(sc, RunOptions(progress=False), None).conn.check_loads()  # noqa: E731
     check()
     check()
     assert len(children) == 1, "the second check is the marker's"
-    marker = runner.loads_ok_marker(sc, runner.sumo_binary())
+    marker = connection.loads_ok_marker(sc, connection.sumo_binary())
     assert marker is not None and marker.exists()
     # An edited route file: checked again.
     rou = sc.route_files[0]
@@ -630,8 +685,8 @@ def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytes
     sc.net_file.write_text("<net><edge id=")
     with pytest.raises(sumo.ScenarioError, match="SUMO refused to start"):
         check()
-    assert runner.loads_ok_marker(sc, runner.sumo_binary()) is not None
-    assert not runner.loads_ok_marker(sc, runner.sumo_binary()).exists()  # type: ignore[union-attr]
+    assert connection.loads_ok_marker(sc, connection.sumo_binary()) is not None
+    assert not connection.loads_ok_marker(sc, connection.sumo_binary()).exists()  # type: ignore[union-attr]
 
 
 def test_lifecycle_removed_and_arrived_vehicles_leave_no_state(tmp_path: Path) -> None:
@@ -796,12 +851,12 @@ def test_bad_input_is_one_line_and_exit_2(tmp_path: Path, make_args, expect: str
 def test_extra_sumo_options_replace_the_runners_own() -> None:
     """SUMO refuses an option given twice, so one the user passes replaces
     the runner's (with its values; negative numbers are values, not options)."""
-    from blendtrack.sumo.runner import _override_options
+    from blendtrack.sumo.connection import override_options
 
-    assert _override_options(["--no-step-log", "true", "--end", "0"], ["--no-warnings", "true", "--end", "5"]) == [
+    assert override_options(["--no-step-log", "true", "--end", "0"], ["--no-warnings", "true", "--end", "5"]) == [
         "--no-step-log", "true", "--no-warnings", "true", "--end", "5"]
-    assert _override_options(["--begin", "-5", "--no-warnings"], ["--scale", "2"]) == ["--begin", "-5", "--no-warnings", "--scale", "2"]
-    assert _override_options(["--seed", "0", "--end", "9"], ["--seed=3"]) == ["--end", "9", "--seed=3"]
+    assert override_options(["--begin", "-5", "--no-warnings"], ["--scale", "2"]) == ["--begin", "-5", "--no-warnings", "--scale", "2"]
+    assert override_options(["--seed", "0", "--end", "9"], ["--seed=3"]) == ["--end", "9", "--seed=3"]
 
 
 def test_sumo_args_reach_sumo(tmp_path: Path) -> None:

@@ -312,7 +312,7 @@ def _sumo_config(
 
 def _cmd_sumo_run(args: argparse.Namespace) -> int:
     from blendtrack import sumo
-    from blendtrack.sumo.runner import parse_ids
+    from blendtrack.sumo.selection import parse_ids
 
     scenario = sumo.resolve_scenario(args.scenario)
     config, vehicle, keys = _sumo_config(args.config)

@@ -7,7 +7,7 @@
 - ``plots/<metric>.png``: the metric against each swept parameter, one line
   per scenario; at each value the runs of a seed are averaged over the other
   swept parameters, then the mean and 95 % Student-t interval are taken
-  across seeds (:func:`blendtrack.sumo.compare.mean_ci`).
+  across seeds (:func:`blendtrack.reporting.mean_ci`).
 - ``summary.md``: runs per status, the best parameter set per metric and
   scenario (mean over seeds; the direction of "better" is set per metric by
   :func:`direction`), the plots, and every failed run with its error.
@@ -104,7 +104,7 @@ def _is_number(v: Any) -> bool:
 
 
 def _fmt(x: Any) -> str:
-    from blendtrack.sumo.compare import fmt
+    from blendtrack.reporting import fmt
 
     return fmt(x) if _is_number(x) else str(x)
 
@@ -149,7 +149,7 @@ def plot_metric(manifest: dict[str, Any], ok: pd.DataFrame, metric: str, dims: S
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from blendtrack.sumo.compare import mean_ci
+    from blendtrack.reporting import mean_ci
 
     scenarios = list(dict.fromkeys(ok["scenario"]))
     n = len(dims)
@@ -204,7 +204,7 @@ def plot_metric(manifest: dict[str, Any], ok: pd.DataFrame, metric: str, dims: S
 
 def best_sets(manifest: dict[str, Any], ok: pd.DataFrame, metrics: Sequence[str]) -> list[dict[str, Any]]:
     """Per metric with a direction and per scenario: the parameter set with the best mean over seeds."""
-    from blendtrack.sumo.compare import mean_ci
+    from blendtrack.reporting import mean_ci
 
     swept = [k for k, vals in manifest.get("swept", {}).items() if len(vals) > 1 and k in ok.columns]
     out = []

@@ -43,7 +43,7 @@ def run_scenario(scenario: Scenario, options: RunOptions, out: str | os.PathLike
     the plots, the optional trace, and SUMO's outputs under ``out/sumo/``
     (``out``: a folder, a ``str`` or a path; created if missing).
 
-    libsumo allows one simulation per process reliably (see ``SumoRun.start``):
+    libsumo allows one simulation per process reliably (see ``SumoConnection.start``):
     when this process has run one already, the run happens in a fresh child
     process (spawned: a script that calls this more than once needs an
     ``if __name__ == "__main__":`` guard) and its result comes back here; a
@@ -51,8 +51,8 @@ def run_scenario(scenario: Scenario, options: RunOptions, out: str | os.PathLike
     and results are pickled across (ControllerConfig and VehicleParams
     pickle through their TOML).
     """
-    from blendtrack.sumo import runner
-    from blendtrack.sumo.selection import check_controlled_ids, reconcile_sumo_args
+    from blendtrack.sumo.connection import libsumo_started
+    from blendtrack.sumo.preflight import check_controlled_ids, reconcile_sumo_args
 
     if not isinstance(out, (str, os.PathLike)):
         raise TypeError(f"run_scenario: out must be a folder path (str or os.PathLike), not {type(out).__name__}")
@@ -60,7 +60,7 @@ def run_scenario(scenario: Scenario, options: RunOptions, out: str | os.PathLike
     options = reconcile_sumo_args(options)
     check_controlled_ids(scenario, options)
     uses_libsumo = options.backend == "libsumo" and not options.gui
-    if uses_libsumo and runner._LIBSUMO_STARTED:
+    if uses_libsumo and libsumo_started():
         return _run_in_child(scenario, options, out)
     return _run_here(scenario, options, out)
 

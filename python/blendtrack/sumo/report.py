@@ -10,14 +10,14 @@ import csv
 import json
 import math
 import os
-import xml.etree.ElementTree as ET
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from blendtrack.sumo.runner import RunResult, VehicleRecord
+from blendtrack.reporting import save_figure
+from blendtrack.sumo.records import RunResult, VehicleRecord
 
 #: The columns of vehicles.csv, in order (more may follow).
 VEHICLE_COLUMNS = (
@@ -110,41 +110,6 @@ def write_json(data: dict[str, Any], path: Path) -> None:
     _atomic_write(path, write)
 
 
-def fcd_lateral_accel(
-    fcd_file: Path, dt_s: float, window_s: float = 1.0, skip_internal: bool = True
-) -> dict[str, tuple[float, str]]:
-    """Largest lateral acceleration of every vehicle in an FCD file.
-
-    ``a_lat = v * dpsi/dt`` with the heading change taken over ``window_s``
-    (it smooths the heading steps where lane shapes meet). Returns
-    ``{vehicle id: (max |a_lat| in m/s^2, lane where it happened)}``; samples
-    on junction lanes are skipped by default (SUMO limits turn speeds there).
-    """
-    k = max(1, round(window_s / dt_s))
-    hist: dict[str, list[tuple[float, float, str]]] = {}
-    best: dict[str, tuple[float, str]] = {}
-    for _, el in ET.iterparse(fcd_file, events=("end",)):
-        if el.tag != "vehicle":
-            if el.tag == "timestep":
-                el.clear()
-            continue
-        vid = el.get("id", "")
-        angle = float(el.get("angle", "nan"))
-        speed = float(el.get("speed", "nan"))
-        lane = el.get("lane", "")
-        h = hist.setdefault(vid, [])
-        h.append((angle, speed, lane))
-        if len(h) > k:
-            a0, _, lane0 = h.pop(0)
-            if skip_internal and (lane.startswith(":") or lane0.startswith(":")):
-                continue
-            dpsi = (angle - a0 + 180.0) % 360.0 - 180.0
-            a_lat = abs(speed * math.radians(dpsi) / (k * dt_s))
-            if a_lat > best.get(vid, (-1.0, ""))[0]:
-                best[vid] = (a_lat, lane)
-    return best
-
-
 def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
     """Lateral-error distribution, speed against curvature, one trajectory."""
     import matplotlib
@@ -160,10 +125,7 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
     ax.set_xlabel("|lateral error| of the control point (m)")
     ax.set_ylabel("samples (every 10th step)")
     ax.set_title("Lateral error of controlled vehicles")
-    fig.tight_layout()
-    files.append(out / "lateral_error_hist.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(save_figure(fig, out / "lateral_error_hist.png", 110))
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
     if len(samples):
@@ -178,10 +140,7 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
     ax.set_xlabel("|path curvature| (1/m)")
     ax.set_ylabel("speed (m/s)")
     ax.set_title("Speed against curvature")
-    fig.tight_layout()
-    files.append(out / "speed_vs_curvature.png")
-    fig.savefig(files[-1], dpi=110)
-    plt.close(fig)
+    files.append(save_figure(fig, out / "speed_vs_curvature.png", 110))
 
     if result.trajectories:
         vid, (traj, ref) = next(iter(result.trajectories.items()))
@@ -193,8 +152,5 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
         ax.set_ylabel("y (m)")
         ax.set_title(f"Trajectory of {vid} against its lane")
         ax.legend(loc="best", fontsize=8)
-        fig.tight_layout()
-        files.append(out / "trajectory.png")
-        fig.savefig(files[-1], dpi=110)
-        plt.close(fig)
+        files.append(save_figure(fig, out / "trajectory.png", 110))
     return files

@@ -1,133 +1,136 @@
-"""Checks of a run's options against the scenario before SUMO starts.
-
-- :func:`declared_ids`: the vehicle, trip and flow ids the scenario's route
-  files declare (read statically, without SUMO).
-- :func:`check_controlled_ids`: ``--controlled-ids`` against those ids: an
-  id the scenario never declares is named in a warning, and a selection of
-  none of its vehicles is an error naming some that exist (it would run
-  with 0 controlled vehicles and look like a success).
-- :func:`reconcile_sumo_args`: ``--sumo-args`` options that blendtrack also
-  sets. ``--end`` given there wins (the run loop stops there too, not only
-  SUMO); given both ways with different values, or ``--seed`` (which also
-  seeds blendtrack's vehicle selection), it is refused.
-"""
+"""Which vehicles blendtrack controls, and with what: the selection rules
+(a seeded fraction, a vType, explicit ids, or the vType parameter
+``blendtrack.controlled``) and each vType's controller and vehicle
+(``blendtrack.*`` vType parameters over the run's configuration)."""
 
 from __future__ import annotations
 
-import dataclasses
-import warnings
-import xml.etree.ElementTree as ET
-from collections.abc import Sequence
-from pathlib import Path
-from typing import TYPE_CHECKING
+import hashlib
+from collections.abc import Iterable
+from typing import Any
 
-from blendtrack.sumo.scenario import Scenario, ScenarioError
+import blendtrack
+from blendtrack import ControllerConfig, VehicleParams
+from blendtrack.sumo.connection import SumoConnection
+from blendtrack.sumo.options import RunOptions
+from blendtrack.sumo.scenario import ScenarioError
 
-if TYPE_CHECKING:
-    from blendtrack.sumo.runner import RunOptions
-
-#: SUMO options that add demand: with one of them in --sumo-args the route
-#: files no longer list every vehicle, so ids are not checked.
-_DEMAND_OPTIONS = ("route-files", "r", "additional-files", "a")
-
-
-def declared_ids(route_files: Sequence[Path]) -> tuple[set[str], set[str]] | None:
-    """(vehicle and trip ids, flow ids) declared in ``route_files``; None if
-    one cannot be read (then nothing can be said about ids)."""
-    vehicles: set[str] = set()
-    flows: set[str] = set()
-    try:
-        for file in route_files:
-            for _, el in ET.iterparse(file):
-                vid = el.get("id")
-                if vid is not None and el.tag in ("vehicle", "trip"):
-                    vehicles.add(vid)
-                elif vid is not None and el.tag == "flow":
-                    flows.add(vid)
-                el.clear()
-    except (OSError, ET.ParseError):
-        return None
-    return vehicles, flows
+#: vType parameter that marks a type as controlled.
+CONTROLLED_PARAM = "blendtrack.controlled"
+#: Prefix of per-vType parameter overrides, e.g. ``blendtrack.lat_blend_factor``.
+PARAM_PREFIX = "blendtrack."
 
 
-def _option_names(args: Sequence[str]) -> set[str]:
-    return {a.split("=", 1)[0].lstrip("-") for a in args if a.startswith("-") and len(a) > 1 and not a[1].isdigit()}
+def unit_hash(seed: int, vid: str) -> float:
+    """A vehicle id's seeded hash in [0, 1): below the controlled fraction, selected."""
+    h = hashlib.blake2b(f"{seed}:{vid}".encode(), digest_size=8).digest()
+    return int.from_bytes(h, "little") / 2.0**64
 
 
-def check_controlled_ids(scenario: Scenario, options: RunOptions) -> None:
-    """Warns naming the ``controlled_ids`` the scenario does not declare;
-    raises :class:`ScenarioError` when it declares none of them."""
-    ids = options.controlled_ids
-    if not ids or _option_names(options.sumo_args) & set(_DEMAND_OPTIONS):
-        return
-    declared = declared_ids(scenario.route_files)
-    if declared is None:
-        return
-    vehicles, flows = declared
+def parse_like(raw: str, current: Any) -> Any:
+    """A vType parameter's text as the type of the value it replaces."""
+    if isinstance(current, bool):
+        low = raw.strip().lower()
+        if low in ("1", "true", "yes"):
+            return True
+        if low in ("0", "false", "no"):
+            return False
+        raise ValueError(raw)
+    if isinstance(current, float):
+        return float(raw)
+    return raw.strip()
 
-    def known(vid: str) -> bool:
-        head, _, tail = vid.rpartition(".")
-        return vid in vehicles or (head in flows and tail.isdigit())
 
-    unknown = [v for v in ids if not known(v)]
-    if len(unknown) == len(ids):
-        some = sorted(vehicles)[:8] + [f"{f}.N" for f in sorted(flows)[:4]]
-        raise ScenarioError(
-            f"{scenario.name}: none of the controlled ids ({', '.join(ids[:8])}) is a vehicle of the scenario "
-            f"(it declares e.g. {', '.join(some) or 'no vehicles'})"
+def parse_ids(values: Iterable[str]) -> tuple[str, ...]:
+    """Vehicle ids from command-line values, each one or several comma-separated."""
+    out: list[str] = []
+    for v in values:
+        out.extend(x for x in v.split(",") if x)
+    return tuple(out)
+
+
+class Selection:
+    """The run's selection rule and the controller and vehicle of each vType
+    (read from SUMO once per vType)."""
+
+    def __init__(self, options: RunOptions, conn: SumoConnection) -> None:
+        self.opt = options
+        self.conn = conn
+        self.base_config = (options.config or ControllerConfig()).replace(
+            use_path_widths="path_width_m" not in options.fixed_keys
         )
-    if unknown:
-        warnings.warn(
-            f"{scenario.name}: controlled ids not in the scenario, ignored: {', '.join(unknown)}",
-            UserWarning,
-            stacklevel=3,
-        )
+        self.base_vehicle = options.vehicle or VehicleParams()
+        if options.alpha is not None:
+            self.base_config = self.base_config.replace(lat_blend_factor=options.alpha)
+        self._types: dict[str, dict[str, Any]] = {}
 
+    def type_info(self, vtype: str) -> dict[str, Any]:
+        """The controller, vehicle and SUMO sizes of ``vtype``."""
+        info = self._types.get(vtype)
+        if info is not None:
+            return info
+        vt = self.conn.sumo.vehicletype
+        overrides: dict[str, Any] = {}
+        vehicle_overrides: dict[str, Any] = {}
+        cfg_keys = set(self.base_config.to_dict())
+        veh_keys = set(self.base_vehicle.to_dict())
+        controlled_param = vt.getParameter(vtype, CONTROLLED_PARAM).strip().lower()
+        for key in sorted(cfg_keys | veh_keys):
+            raw = vt.getParameter(vtype, PARAM_PREFIX + key)
+            if raw == "":
+                continue
+            target = overrides if key in cfg_keys else vehicle_overrides
+            current = (self.base_config.to_dict() if key in cfg_keys else self.base_vehicle.to_dict())[key]
+            try:
+                target[key] = parse_like(raw, current)
+            except ValueError:
+                raise ScenarioError(f"vType {vtype!r}: param {PARAM_PREFIX + key} = {raw!r} is not a valid {type(current).__name__}") from None
+        param_keys = {PARAM_PREFIX + k for k in (*overrides, *vehicle_overrides)}
+        # max_obs_deceleration in SUMO runs, unless set explicitly
+        # (RunOptions.fixed_keys or a blendtrack.* vType param): the paper assumes an
+        # obstacle braking at 8 m/s^2 while the vehicle plans with 4, which at 33 m/s
+        # keeps about 3 s to a leader and cuts a highway's capacity nearly in half
+        # (measured: 378 instead of 650 vehicles entered, highway_onramp x2, 300 s,
+        # every vehicle controlled). Here the leader is assumed to brake as hard as
+        # the vehicle plans to (max_obs_deceleration = max_deceleration): about
+        # reaction_time s of headway at equal speeds, the assumption of SUMO's Krauss
+        # model. preferred_acceleration keeps the paper's 1 m/s^2: with the vType's
+        # 2.6 m/s^2 the urban grid with every vehicle controlled had 3 junction
+        # collisions in 300 s (README, known limits).
+        if "max_obs_deceleration" not in self.opt.fixed_keys and "max_obs_deceleration" not in overrides:
+            overrides["max_obs_deceleration"] = overrides.get("max_deceleration", self.base_config.max_deceleration)
+        try:
+            cfg = self.base_config.replace(**overrides) if overrides else self.base_config
+            veh = self.base_vehicle.replace(**vehicle_overrides) if vehicle_overrides else self.base_vehicle
+            cfg.validate()
+            veh.validate()
+        except blendtrack.BlendtrackError as e:
+            raise ScenarioError(f"vType {vtype!r}: {e}") from None
+        length = float(vt.getLength(vtype))
+        wheelbase = min(float(veh.wheelbase_m), 0.8 * length)
+        if wheelbase != veh.wheelbase_m:
+            veh = veh.replace(wheelbase_m=wheelbase)
+        info = {
+            "param_keys": param_keys,
+            "controlled_param": controlled_param in ("1", "true", "yes"),
+            "config": cfg,
+            "vehicle": veh,
+            "length": length,
+            "min_gap": float(vt.getMinGap(vtype)),
+            "max_speed": float(vt.getMaxSpeed(vtype)),
+        }
+        self._types[vtype] = info
+        return info
 
-def _take_option(args: list[str], names: tuple[str, ...]) -> tuple[list[str], str | None]:
-    """``args`` without the option ``names`` (``--end 5`` or ``--end=5``), and its value."""
-    kept: list[str] = []
-    value: str | None = None
-    i = 0
-    while i < len(args):
-        a = args[i]
-        name, eq, inline = a.partition("=")
-        if a.startswith("-") and name.lstrip("-") in names and (name.startswith("--") or len(name) == 2):
-            if eq:
-                value = inline
-                i += 1
-            else:
-                value = args[i + 1] if i + 1 < len(args) else ""
-                i += 2
-            continue
-        kept.append(a)
-        i += 1
-    return kept, value
-
-
-def reconcile_sumo_args(options: RunOptions) -> RunOptions:
-    """``options`` with an ``--end`` of ``sumo_args`` moved to ``end_s``;
-    raises :class:`ScenarioError` for a conflicting end or a ``--seed`` there."""
-    args = list(options.sumo_args)
-    if not args:
-        return options
-    _, seed = _take_option(args, ("seed",))
-    if seed is not None:
-        raise ScenarioError(
-            f"--sumo-args: give the seed as blendtrack's own seed (--seed N), not to SUMO ({seed!r}): "
-            "it also seeds the choice of controlled vehicles"
-        )
-    kept, end = _take_option(args, ("end", "e"))
-    if end is None:
-        return options
-    try:
-        end_s = float(end)
-    except ValueError:
-        raise ScenarioError(f"--sumo-args: --end {end!r} is not a number of seconds") from None
-    if not end_s > 0 or end_s == float("inf"):
-        raise ScenarioError(f"--sumo-args: --end must be finite and > 0, got {end!r}")
-    if options.end_s is not None and options.end_s != end_s:
-        raise ScenarioError(
-            f"the end time is given twice, {options.end_s:g} s (--end) and {end_s:g} s (--sumo-args): give it once"
-        )
-    return dataclasses.replace(options, end_s=end_s, sumo_args=tuple(kept))
+    def is_selected(self, vid: str, vtype: str, n_controlled: int) -> bool:
+        """Is ``vid`` (of ``vtype``) to be controlled, ``n_controlled`` being taken over so far?"""
+        o = self.opt
+        if o.max_controlled is not None and n_controlled >= o.max_controlled:
+            return False
+        if o.controlled_ids:
+            return vid in o.controlled_ids
+        if o.controlled_fraction is not None:
+            return unit_hash(o.seed, vid) < o.controlled_fraction
+        if o.controlled_type is not None:
+            return vtype == o.controlled_type
+        return bool(self.type_info(vtype)["controlled_param"])

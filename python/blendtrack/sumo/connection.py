@@ -1,0 +1,353 @@
+"""The connection to SUMO: starting and closing a simulation (in-process
+through libsumo, or over TraCI sockets, which sumo-gui needs), the SUMO
+binary and command line (option overrides), the check that a scenario loads
+before libsumo gets it (and its cache, :func:`loads_ok_marker`), the
+per-vehicle calls of the hot loop, and the per-step caches."""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+from blendtrack.sumo.options import RunOptions
+from blendtrack.sumo.scenario import Scenario, ScenarioError
+
+# True once this process has started a libsumo simulation (see SumoConnection.start).
+_LIBSUMO_STARTED = False
+
+
+def libsumo_started() -> bool:
+    """Has this process run a libsumo simulation already (see ``SumoConnection.start``)?"""
+    return _LIBSUMO_STARTED
+
+
+def _sumo_home() -> str:
+    home = os.environ.get("SUMO_HOME")
+    if home:
+        return home
+    import sumo  # the eclipse-sumo wheel
+
+    home = str(sumo.SUMO_HOME)
+    os.environ["SUMO_HOME"] = home
+    return home
+
+
+def sumo_binary(gui: bool = False) -> str:
+    """Path of the ``sumo`` (or ``sumo-gui``) binary of the installed SUMO:
+    the eclipse-sumo wheel's, else ``$SUMO_HOME/bin``, else the one on PATH."""
+    import shutil
+
+    name = "sumo-gui" if gui else "sumo"
+    homes = []
+    try:
+        import sumo  # the eclipse-sumo wheel
+
+        homes.append(str(sumo.SUMO_HOME))
+    except ImportError:
+        pass
+    homes.append(_sumo_home())
+    for home in homes:
+        path = Path(home) / "bin" / name
+        if path.exists():
+            return str(path)
+    return shutil.which(name) or name
+
+
+def _cache_dir() -> Path:
+    env = os.environ.get("BLENDTRACK_CACHE_DIR")
+    if env:
+        return Path(env)
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "blendtrack"
+
+
+def loads_ok_marker(scenario: Scenario, binary: str, sumo_args: tuple[str, ...] = ()) -> Path | None:
+    """Where the runner notes that SUMO loaded ``scenario`` without error: a
+    file named by a hash of the SUMO binary (path, size, modification time),
+    the .sumocfg and every file its ``<input>`` names (the network, routes,
+    additional files) and the extra SUMO options, under
+    ``$BLENDTRACK_CACHE_DIR`` (default ``~/.cache/blendtrack``). Any change to
+    them is another name, so the child check runs again. None when a file
+    cannot be read (no caching)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        h = hashlib.sha256()
+        st = os.stat(binary)
+        h.update(f"{os.path.realpath(binary)}:{st.st_size}:{st.st_mtime_ns}\n".encode())
+        cfg = scenario.sumocfg
+        h.update(cfg.read_bytes())
+        h.update(("\n".join(sumo_args) + "\n").encode())
+        files = {scenario.net_file, *scenario.route_files}
+        inputs = ET.parse(cfg).getroot().find("input")
+        for opt in inputs if inputs is not None else ():
+            for part in opt.get("value", "").replace(",", " ").split():
+                f = (cfg.parent / part).resolve()
+                if f.is_file():
+                    files.add(f)
+        for f in sorted(files):
+            h.update(f"\n{f}\n".encode())
+            with open(f, "rb") as fh:
+                for chunk in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(chunk)
+    except (OSError, ET.ParseError):
+        return None
+    return _cache_dir() / "sumo-loads-ok" / h.hexdigest()
+
+
+class SumoConnection:
+    """One SUMO simulation: its process (or libsumo), the TraCI constants,
+    the bound per-vehicle calls and the per-step caches."""
+
+    def __init__(self, scenario: Scenario, options: RunOptions, out_dir: Path | None) -> None:
+        self.scenario = scenario
+        self.opt = options
+        self.out_dir = out_dir
+        self.sumo: Any = None
+        self.tc: Any = None
+        self.use_subscriptions = False
+        self.backend = "libsumo"
+        self.backend_note = ""
+        self.dt = math.nan
+        self.has_tls = False
+        # The hot loop's per-vehicle calls (see _bind_calls).
+        self.get_leader: Any = None
+        self.get_speed: Any = None
+        self.get_lane_id: Any = None
+        self.get_lane_pos: Any = None
+        self.get_route_id: Any = None
+        self.set_speed: Any = None
+        self.move_to: Any = None
+        self.move_to_xy: Any = None
+        self.lane_change_state: Any = None
+        self.lane_vehicles: Any = None
+        #: Lanes' vehicle lists read this step (several vehicles ask about one junction).
+        self._lane_ids: dict[str, Any] = {}
+
+    def command(self) -> list[str]:
+        """The ``sumo`` command line of the run."""
+        cmd = [sumo_binary(self.opt.gui), "-c", str(self.scenario.sumocfg), "--seed", str(self.opt.seed)]
+        cmd += ["--no-step-log", "true", "--duration-log.disable", "true"]
+        if self.out_dir is not None:
+            sd = self.out_dir / "sumo"
+            sd.mkdir(parents=True, exist_ok=True)
+            cmd += ["--tripinfo-output", str(sd / "tripinfo.xml"), "--device.emissions.probability", "1"]
+            cmd += ["--collision-output", str(sd / "collisions.xml"), "--log", str(sd / "sumo.log")]
+            if self.opt.fcd:
+                cmd += ["--fcd-output", str(sd / "fcd.xml")]
+            if self.opt.ssm:
+                cmd += [
+                    "--device.ssm.probability", "1",
+                    "--device.ssm.file", str(sd / "ssm.xml"),
+                    "--device.ssm.measures", "TTC DRAC PET",
+                    "--device.ssm.thresholds", "3.0 3.0 2.0",
+                ]
+        if self.opt.end_s is not None:
+            cmd += ["--end", str(self.opt.end_s)]
+        # SUMO refuses an option given twice: the user's replace ours.
+        return cmd[:3] + override_options(cmd[3:], list(self.opt.sumo_args))
+
+    def start(self) -> None:
+        global _LIBSUMO_STARTED
+        _sumo_home()
+        self.backend = "traci" if (self.opt.backend == "traci" or self.opt.gui) else "libsumo"
+        if self.backend == "libsumo" and _LIBSUMO_STARTED:
+            # libsumo 1.28 keeps state across simulations in one process: a
+            # second simulation of the urban grid after one with every
+            # vehicle moved by moveToXY crashed (segmentation fault). A
+            # second run in a process therefore drives SUMO over TraCI (its
+            # own process; same results, slower); run_scenario avoids this by
+            # running it in a fresh process instead.
+            self.backend = "traci"
+            self.backend_note = "libsumo was already used in this process: TraCI instead"
+        if self.backend == "traci":
+            import traci
+            import traci.constants as tc
+
+            self.sumo = traci
+            self.tc = tc
+            self.use_subscriptions = True
+            label = f"blendtrack-{os.getpid()}-{id(self)}"
+            try:
+                traci.start(self.command(), label=label)
+            except Exception as e:  # SUMO refused the configuration
+                raise ScenarioError(f"{self.scenario.sumocfg}: SUMO refused to start: {_first_line(e)}") from None
+            self.sumo = traci.getConnection(label)
+        else:
+            import libsumo
+            import traci.constants as tc  # the same constants libsumo uses
+
+            # libsumo runs SUMO inside this process, and SUMO 1.28 crashes it
+            # (segmentation fault) on some malformed networks: load the
+            # configuration once in a child process first, so a bad scenario
+            # is a clear error and not a dead interpreter.
+            self.check_loads()
+
+            self.sumo = libsumo
+            self.tc = tc
+            self.use_subscriptions = False
+            _LIBSUMO_STARTED = True
+            try:
+                libsumo.start(self.command())
+            except Exception as e:
+                raise ScenarioError(f"{self.scenario.sumocfg}: SUMO refused to start: {_first_line(e)}") from None
+        self.dt = float(self.sumo.simulation.getDeltaT())
+        tc = self.tc
+        self.sumo.simulation.subscribe(
+            [
+                tc.VAR_DEPARTED_VEHICLES_IDS,
+                tc.VAR_ARRIVED_VEHICLES_IDS,
+                tc.VAR_TELEPORT_STARTING_VEHICLES_IDS,
+                tc.VAR_COLLIDING_VEHICLES_IDS,
+            ]
+        )
+        types = set(self.sumo.vehicletype.getIDList())
+        if self.opt.controlled_type is not None and self.opt.controlled_type not in types:
+            self.close()
+            raise ScenarioError(
+                f"--controlled-type {self.opt.controlled_type!r}: no such vType in {self.scenario.sumocfg.name} "
+                f"(known: {', '.join(sorted(types))})"
+            )
+        lights = self.sumo.trafficlight.getIDList()
+        for tls in lights:
+            self.sumo.trafficlight.subscribe(tls, [tc.TL_RED_YELLOW_GREEN_STATE])
+        self.has_tls = bool(lights)
+        self._bind_calls()
+
+    def _bind_calls(self) -> None:
+        """The per-vehicle SUMO calls of the hot loop. With libsumo, its SWIG
+        functions themselves: the Python wrappers around them add about a
+        third to each call (measured: setSpeed 405 vs 279 ns)."""
+        v = self.sumo.vehicle
+        raw: Any = None
+        if self.backend == "libsumo":
+            try:
+                import libsumo._libsumo
+
+                raw = libsumo._libsumo
+            except ImportError:  # a libsumo built differently: its wrappers then
+                raw = None
+
+        def pick(name: str) -> Any:
+            f = getattr(raw, "vehicle_" + name, None)
+            return f if callable(f) else getattr(v, name)
+
+        self.get_leader = pick("getLeader")
+        self.get_speed = pick("getSpeed")
+        self.get_lane_id = pick("getLaneID")
+        self.get_lane_pos = pick("getLanePosition")
+        self.get_route_id = pick("getRouteID")
+        self.set_speed = pick("setSpeed")
+        self.move_to = pick("moveTo")
+        self.move_to_xy = pick("moveToXY")
+        self.lane_change_state = pick("getLaneChangeState")
+        lane_ids = getattr(raw, "lane_getLastStepVehicleIDs", None)
+        self.lane_vehicles = lane_ids if callable(lane_ids) else self.sumo.lane.getLastStepVehicleIDs
+
+    def check_loads(self) -> None:
+        """Loads the scenario once in a child ``sumo`` (see ``start``). A
+        scenario that loaded before, byte for byte with the same SUMO binary,
+        is not loaded again (``loads_ok_marker``): the check costs a second
+        on the highway, once per run otherwise (batch sweeps, benchmarks)."""
+        import subprocess
+
+        binary = sumo_binary(False)
+        marker = loads_ok_marker(self.scenario, binary, tuple(self.opt.sumo_args))
+        if marker is not None and marker.exists():
+            return
+        # SUMO refuses an option given twice: the user's extra options replace
+        # the check's quiet flags, and the check's --end 0 replaces theirs.
+        quiet = ["--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
+        opts = override_options(override_options(quiet, list(self.opt.sumo_args)), ["--end", "0"])
+        cmd = [binary, "-c", str(self.scenario.sumocfg), *opts]
+        try:
+            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+        except (OSError, subprocess.TimeoutExpired) as e:
+            raise ScenarioError(f"{self.scenario.sumocfg}: cannot run SUMO to check the scenario: {e}") from None
+        if proc.returncode != 0:
+            lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
+            crash = f"SUMO crashed while loading it (signal {-proc.returncode})" if proc.returncode < 0 else f"exit code {proc.returncode}"
+            errors = [ln for ln in lines if "Error" in ln] or lines or [crash]
+            raise ScenarioError(f"{self.scenario.sumocfg}: SUMO refused to start: {errors[0].strip()}")
+        if marker is not None:
+            try:
+                marker.parent.mkdir(parents=True, exist_ok=True)
+                tmp = marker.with_name(marker.name + f".{os.getpid()}.tmp")
+                tmp.write_text(str(self.scenario.sumocfg) + "\n")
+                os.replace(tmp, marker)
+            except OSError:
+                pass  # no cache: the check runs again next time
+
+    def close(self) -> None:
+        if self.sumo is not None:
+            try:
+                self.sumo.close()
+            except Exception:
+                pass
+            self.sumo = None
+
+    def time(self) -> float:
+        """SUMO's simulation time, NaN once closed (or when SUMO cannot say)."""
+        try:
+            return float(self.sumo.simulation.getTime()) if self.sumo is not None else math.nan
+        except Exception:
+            return math.nan
+
+    def new_step(self) -> None:
+        """A new control step: the per-step caches start empty."""
+        self._lane_ids = {}
+
+    def vehicles_on(self, lane: str) -> Any:
+        """SUMO's list of the vehicles on ``lane`` this step, read once a step
+        (several vehicles ask about the lanes of one junction)."""
+        ids = self._lane_ids.get(lane)
+        if ids is None:
+            ids = self._lane_ids[lane] = self.lane_vehicles(lane)
+        return ids
+
+    def hand_back(self, vid: str) -> None:
+        """SUMO's own driving for ``vid`` again (each call on its own: one
+        failing, say on a vehicle gone meanwhile, does not skip the rest)."""
+        v = self.sumo.vehicle
+        for call, args in ((v.setSpeed, (-1.0,)), (v.setSpeedMode, (31,)), (v.setLaneChangeMode, (1621,)), (v.unsubscribe, ())):
+            try:
+                call(vid, *args)
+            except Exception:
+                pass
+
+
+def override_options(base: list[str], extra: list[str]) -> list[str]:
+    """SUMO command-line options ``base`` with ``extra`` added, an option in
+    both taken from ``extra`` only (SUMO refuses one given twice). An option
+    is a token starting with ``-`` and the tokens after it up to the next
+    such token (its values; none for a bare flag)."""
+
+    given = {name for a in extra if (name := _option_name(a)) is not None}
+    kept: list[str] = []
+    skipping = False
+    for a in base:
+        name = _option_name(a)
+        if name is not None:
+            skipping = name in given
+        if not skipping:
+            kept.append(a)
+    return kept + extra
+
+
+def _option_name(token: str) -> str | None:
+    """The option a command-line token names (``--end=5`` -> ``end``), or
+    None for a value (a negative number is a value)."""
+    if not token.startswith("-"):
+        return None
+    try:
+        float(token)
+        return None
+    except ValueError:
+        return token.split("=", 1)[0].lstrip("-")
+
+
+def _first_line(e: BaseException) -> str:
+    text = str(e).strip() or type(e).__name__
+    return text.splitlines()[0]

@@ -1,0 +1,523 @@
+"""Lane changes of controlled vehicles: the ones the route needs, the ones
+SUMO's lane-change model wants (tactical), courtesy to a vehicle waiting to
+merge, and the soft leaders these give (a vehicle lined up behind on
+another lane)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import blendtrack
+from blendtrack.sumo.connection import SumoConnection
+from blendtrack.sumo.geometry import RouteGeometry
+from blendtrack.sumo.network import Network
+from blendtrack.sumo.tracks import Active, Tracks
+
+#: A vehicle's followers and leaders on the lane beside it: (gap m, speed m/s) each.
+Neighbours = tuple[list[tuple[float, float]], list[tuple[float, float]]]
+
+# Room kept before the end of a lane that does not continue, to change lanes (m).
+LANE_CHANGE_ROOM_M = 15.0
+# A lane change starts only with this gap (m), plus what the closing speed
+# eats during the change, to the vehicles ahead and behind on the target lane.
+LANE_CHANGE_GAP_M = 5.0
+# A lane change takes LANE_CHANGE_S seconds of travel at the present speed
+# (at least LANE_CHANGE_MIN_M, at most LANE_CHANGE_MAX_M metres, and no more
+# than the lane has left): 1.6 m/s across on average, 4.8 m/s^2 of lateral
+# acceleration at most for a 3.2 m lane. (At most 30 m before: a change at
+# 30 m/s swept across in one second, at up to 19 m/s^2. Measured on the
+# highway, 600 s, every vehicle controlled: 2 s and 60 m let in more than
+# 30 m, and more than 3 s and 100 m, whose longer gaps held the mergers back.)
+LANE_CHANGE_S = 2.0
+LANE_CHANGE_MIN_M = 10.0
+LANE_CHANGE_MAX_M = 60.0
+# A lane change whose vehicle is still within this distance (m) of its lane's
+# centre is checked again every step and given up when the room has gone.
+ABORT_CHANGE_LAT_M = 0.5
+# During a change the leader on the lane left behind stops counting once the
+# change will have the vehicle this far (m) beside it, sideways, when its front
+# reaches it (``LaneChanges.left_behind``), the front axle taken this far (m)
+# behind the front bumper.
+LANE_CHANGE_CLEAR_M = 0.5
+CHANGE_AXLE_BEHIND_M = 2.0
+# Courtesy to a vehicle waiting to change lanes onto a controlled vehicle's
+# lane (a merge at the end of an acceleration lane): the nearest controlled
+# follower on the target lane (up to COURTESY_RANGE_M behind it) that can do so
+# braking at most COURTESY_DECEL_MPS2 takes it as its leader and opens the gap;
+# nearer ones drive on. SUMO's drivers do the like for each other (LC2013's
+# cooperative speed adaptation), but not for vehicles blendtrack drives.
+COURTESY_DECEL_MPS2 = 2.0
+COURTESY_RANGE_M = 150.0
+# Lane changes the route does not need: every TACTICAL_CHECK_EVERY steps
+# (staggered over the vehicles) SUMO's lane-change model (LC2013, whose state
+# it keeps for every vehicle, controlled or not) is asked whether a controlled
+# vehicle would change to gain speed, to keep right or to make room for a
+# merger; where it would, has room by SUMO's and blendtrack's checks and drives
+# at TACTICAL_MIN_SPEED_MPS or more, blendtrack makes the change (as it does
+# the ones the route needs). Without them controlled vehicles keep their lane
+# for good: at a merge the mainline never moves over, the ramp's traffic all
+# lands on the right lane, and it jams.
+TACTICAL_CHECK_EVERY = 10
+TACTICAL_MIN_SPEED_MPS = 3.0
+# Such a change also needs, to the target lane's follower and leader, a gap of
+# LANE_CHANGE_GAP_M plus TACTICAL_HEADWAY_S of the rear one's speed plus what
+# it takes the rear one to come down to the front one's speed braking at
+# TACTICAL_DECEL_MPS2: nobody brakes hard for a change that is only wanted
+# (SUMO's "not blocked" is by its own drivers' measure, and lets a changer cut
+# in closer than blendtrack's stopping law keeps).
+TACTICAL_HEADWAY_S = 1.0
+TACTICAL_DECEL_MPS2 = 1.0
+# Once started, such a change is given up (back to its lane) as soon as the
+# room falls below the same gaps at half the headway and twice the braking
+# (the margin keeps a change from being given up for a small speed change).
+TACTICAL_KEEP_FACTOR = 0.5
+# No such change within this many metres past where SUMO has inserted a
+# vehicle on an edge: SUMO inserts on a lane without seeing a vehicle that is
+# changing onto it (traced: a vehicle inserted at 28 m/s behind one that
+# moved onto its lane at 10 m/s ran into it).
+TACTICAL_INSERTION_CLEAR_M = 200.0
+
+
+class LaneChanges:
+    """The lane changes under way and due, and this step's soft leaders."""
+
+    def __init__(self, conn: SumoConnection, network: Network, tracks: Tracks, active: dict[str, Active], plan_decel: float) -> None:
+        self.conn = conn
+        self.network = network
+        self.tracks = tracks
+        #: The runner's controlled vehicles by id (read only here).
+        self.active = active
+        #: The deceleration (m/s^2, > 0) a vehicle plans to stop with.
+        self.plan_decel = plan_decel
+        #: The vehicles changing lanes.
+        self.changing: dict[str, Active] = {}
+        #: Vehicles where a lane change is due: (vid, lane, lane position, speed).
+        self.due: list[tuple[str, int, float, float]] = []
+        #: This step's courtesy leaders: follower id -> (lane changer id, gap m).
+        self._courtesy: dict[str, tuple[str, float]] = {}
+        #: This step's target-lane leaders of vehicles waiting to change lanes:
+        #: vehicle id -> (leader id, gap m).
+        self._merge_leads: dict[str, tuple[str, float]] = {}
+        #: Edge -> the furthest position SUMO has inserted a vehicle at.
+        self._insertions: dict[str, float] = {}
+        self.counts = {"lane_changes_aborted": 0, "courtesy_steps": 0, "merge_lead_steps": 0, "tactical_lane_changes": 0}
+
+    def set_changing(self, act: Active, changing: tuple[int, int] | None) -> None:
+        act.changing = changing
+        if changing is None:
+            act.tactical = False
+            act.change_span = None
+            self.changing.pop(act.vid, None)
+        else:
+            self.changing[act.vid] = act
+
+    def drop(self, vid: str) -> None:
+        """``vid`` is no longer controlled."""
+        self.changing.pop(vid, None)
+
+    # ------------------------------------------------------------- under way
+    def changing_leaders(self, leaders: list[Any], pos: dict[int, int] | None, index: dict[str, int]) -> None:
+        """The lane changers' leaders (``leaders[pos[i]]`` for the vehicle at
+        ``index[vid]`` = i, or ``leaders[i]`` when all are listed)."""
+        for act in list(self.changing.values()):
+            i = index[act.vid]
+            k = i if pos is None else pos[i]
+            leaders[k] = self.changing_leader(act, leaders[k])
+
+    def left_behind(self, act: Active, lead: Any) -> bool:
+        """During a lane change: is ``lead``, the leader on the lane the
+        vehicle leaves (SUMO's ``(id, gap)``), one it leaves behind? It is
+        when the change's smoothstep has the vehicle clear of it (lateral
+        room ``LANE_CHANGE_CLEAR_M``) by the time the front reaches its back,
+        with the leader standing (the worst case), and the vehicle either is
+        past giving the change up (a change the route needs, over
+        ``ABORT_CHANGE_LAT_M`` from its lane's centre) or could still stop
+        short of it at the planning deceleration. Braking for it would keep
+        the vehicle slow on its way onto the target lane (traced: a merger
+        braked from 9.5 to 4.3 m/s during its change for a vehicle standing
+        at the end of the acceleration lane, and the follower on the target
+        lane then braked at 9 m/s^2)."""
+        if act.change_span is None or act.changing is None or not lead or not lead[0] or not float(lead[1]) >= -100.0:
+            return False
+        v = self.conn.sumo.vehicle
+        vid, lid = act.vid, str(lead[0])
+        speed = max(float(v.getSpeed(vid)), 0.0)
+        gap = float(lead[1])
+        committed = not act.tactical and abs(float(v.getLateralLanePosition(vid))) >= ABORT_CHANGE_LAT_M
+        if not committed and gap < speed * speed / (2.0 * self.plan_decel) + LANE_CHANGE_GAP_M:
+            return False
+        start, length = act.change_span
+        lane_id = v.getLaneID(vid)
+        edge = lane_id.rpartition("_")[0]
+        net = self.network.net()
+        try:
+            lane = net.getLane(lane_id)
+            spacing = 0.5 * (float(lane.getWidth()) + float(net.getLane(f"{edge}_{act.changing[1]}").getWidth()))
+        except (KeyError, AttributeError):
+            return False  # not on the edge the change is on (a junction lane): the leader counts
+        # Where the front axle is when the front bumper reaches the leader's
+        # back (SUMO's gap leaves out minGap): the offset the change has there.
+        back = float(v.getLanePosition(vid)) + gap + float(v.getMinGap(vid))
+        if back > float(lane.getLength()):
+            return False  # beyond this lane: where lanes merge it may be ahead on the target lane too
+        u = min(max((back - CHANGE_AXLE_BEHIND_M - start) / max(length, 1e-6), 0.0), 1.0)
+        offset = spacing * u * u * (3.0 - 2.0 * u)
+        return offset >= 0.5 * (float(v.getWidth(vid)) + float(v.getWidth(lid))) + LANE_CHANGE_CLEAR_M
+
+    def changing_leader(self, act: Active, lead: Any) -> Any:
+        """During a lane change SUMO reports the leader on the lane the vehicle
+        is still on; the one on the target lane matters as much. Returns the
+        closer of the two (or the one there is)."""
+        v = self.conn.sumo.vehicle
+        direction, target = act.changing  # type: ignore[misc]
+        if v.getLaneIndex(act.vid) == target:
+            self.set_changing(act, None)
+            return lead
+        if act.tactical:
+            # Until SUMO puts it on the target lane nobody there sees it, and
+            # a SUMO driver may move onto that lane from the far side: a
+            # change that is only wanted is given up whenever its room goes.
+            if not self.tactical_room(act.vid, direction, float(v.getSpeed(act.vid)), TACTICAL_KEEP_FACTOR):
+                self.abort_change(act)
+                return lead
+        elif abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M:
+            # Barely started (or held at its start by a leader): the room
+            # checked when it began may be gone, e.g. a follower has come up
+            # on the target lane while the vehicle stood. Check again.
+            speed = float(v.getSpeed(act.vid))
+            length = change_length(speed, math.inf)
+            if not self.target_lane_clear(act.vid, direction, speed, length / max(abs(speed), 1.0)):
+                self.abort_change(act)
+                return lead
+        if self.left_behind(act, lead):
+            lead = None
+        # getNeighbors mode: bit 0 right (1) / left (0), bit 1 leaders (2).
+        for nid, gap in v.getNeighbors(act.vid, 2 | (1 if direction < 0 else 0)):
+            # A neighbour alongside (gap < 0) is no obstacle ahead: braking
+            # would leave the vehicle standing across both lanes.
+            if gap >= 0.0:
+                lead = self.tighter_leader(lead, (nid, gap))
+        return lead
+
+    def abort_change(self, act: Active) -> None:
+        """Back to the lane the vehicle is on, the change pending again (it is
+        retried when there is room)."""
+        lane_index = int(self.conn.sumo.vehicle.getLaneIndex(act.vid))
+        geo, track = self.tracks.geometry(act.geo.edges, max(lane_index, 0))
+        self.tracks.retrack(act, geo, track, owned=False)
+        self.set_changing(act, None)
+        self.counts["lane_changes_aborted"] += 1
+
+    def begin_change(self, act: Active, geo: RouteGeometry, track: int, direction: int, target: int, span: tuple[float, float]) -> None:
+        """``act`` starts a lane change on its own ``track`` (built for it),
+        over ``span`` (front's lane position where it starts, length)."""
+        self.tracks.retrack(act, geo, track, owned=True)
+        self.set_changing(act, (direction, target))
+        act.change_span = span
+        act.record.lane_changes += 1
+
+    # ---------------------------------------------------- the route's changes
+    def make_due(self) -> None:
+        """The changes found due last step (``due``), made where there is room."""
+        name = self.tracks.lanes.name
+        for vid, lane, pos, speed in self.due:
+            act = self.active.get(vid)
+            if act is not None:
+                self.try_lane_change(act, name(lane), pos, speed)
+        self.due = []
+
+    def try_lane_change(self, act: Active, lane_id: str, pos: float, speed: float) -> None:
+        """A lane change is due on this edge: make it once SUMO's lane-change
+        model says the target lane has room (``couldChangeLane``)."""
+        geo = act.geo
+        if geo.pending_change is None:
+            return
+        k_edge, target = geo.pending_change
+        edge, _, index = lane_id.rpartition("_")
+        if edge != geo.edges[k_edge] or not index.isdigit() or int(index) == target:
+            return
+        current = int(index)
+        direction = 1 if target > current else -1
+        target_lane = f"{edge}_{target}"
+        if not could_change_lane(self.conn.lane_change_state, act.vid, direction):
+            self.wait_for_gap(act.vid, direction, target_lane, pos, speed)
+            return
+        lane_length = float(self.network.net().getLane(lane_id).getLength())
+        length = change_length(speed, lane_length - pos - 1.0)
+        if length < 8.0:
+            return
+        # SUMO (without the sublane model) shows the vehicle on the target
+        # lane only once its centre is over the line, so vehicles there do
+        # not react to it before: start only with room for the whole change
+        # (its duration, at the present speed or 1 m/s, times the closing
+        # speed) plus a margin.
+        if not self.target_lane_clear(act.vid, direction, speed, length / max(abs(speed), 1.0)):
+            self.wait_for_gap(act.vid, direction, target_lane, pos, speed)
+            return
+        geo2, track = self.tracks.geometry(geo.edges[k_edge:], current, change=(pos, length))
+        self.begin_change(act, geo2, track, direction, target, (pos, length))
+
+    def wait_for_gap(self, vid: str, direction: int, target_lane: str, pos: float, speed: float) -> None:
+        """``vid`` has a lane change due and no room yet: it keeps behind the
+        target lane's nearest vehicle ahead as well as its own leader, so it
+        matches the target lane's speed and lines up behind that vehicle, and
+        it falls back behind a vehicle alongside (taken as a leader at gap 0:
+        the stopping law then keeps it a little slower) rather than drive
+        level with it down the lane; the follower there is asked for
+        courtesy."""
+        v = self.conn.sumo.vehicle
+        side = 1 if direction < 0 else 0
+        near = [(nid, max(gap, 0.0)) for nid, gap in v.getNeighbors(vid, 2 | side)]
+        near += [(nid, 0.0) for nid, gap in v.getNeighbors(vid, side) if gap < 0.0]
+        lead = None
+        for cand in near:
+            lead = self.tighter_leader(lead, cand)
+        if lead is not None:
+            self._merge_leads[vid] = lead
+        self.ask_courtesy(vid, target_lane, pos, speed)
+
+    def ask_courtesy(self, vid: str, target_lane: str, pos: float, speed: float) -> None:
+        """``vid`` waits to change onto ``target_lane`` with its front at
+        ``pos``: the nearest controlled vehicle behind it there, within
+        ``COURTESY_RANGE_M``, that can stay behind it braking at most
+        ``COURTESY_DECEL_MPS2`` is given it as its leader this step (nearer
+        ones, too close to brake so gently, pass). Gaps as SUMO's leader gaps
+        (the changer's back less the follower's front and minGap), less the
+        room the change needs."""
+        v = self.conn.sumo.vehicle
+        back = pos - float(v.getLength(vid))
+        for fid in reversed(self.conn.vehicles_on(target_lane)):
+            f_pos = float(v.getLanePosition(fid))
+            if f_pos >= back:
+                continue  # ahead of the changer's back, or alongside
+            if back - f_pos > COURTESY_RANGE_M:
+                return
+            if fid not in self.active:
+                continue  # SUMO's own drivers cooperate in SUMO's way
+            # It stays back far enough for the change to start: the changer
+            # asks LANE_CHANGE_GAP_M of room (and a metre more, so a follower
+            # that creeps up does not close it again).
+            gap = back - f_pos - float(v.getMinGap(fid)) - LANE_CHANGE_GAP_M - 1.0
+            closing = max(float(v.getSpeed(fid)) - max(speed, 0.0), 0.0)
+            if gap > 0.5 and closing * closing <= 2.0 * COURTESY_DECEL_MPS2 * gap:
+                old = self._courtesy.get(fid)
+                if old is None or gap < old[1]:
+                    self._courtesy[fid] = (vid, gap)
+                return
+
+    # ------------------------------------------------------------- soft leaders
+    def has_soft_leaders(self) -> bool:
+        return bool(self._courtesy or self._merge_leads)
+
+    def soft_leaders(self, index: dict[str, int]) -> list[tuple[int, str, float]]:
+        """This step's vehicles to line up behind, as ``plan_sumo``'s
+        ``soft_leaders`` (by the index of the vehicle in ``index``); taken,
+        so the next step starts with none. A courtesy follower's is the lane
+        changer it gives way to, a waiting changer's the vehicle it lines up
+        behind. Each comes on top of the vehicle's own leader, as a soft
+        obstacle: the vehicle falls back for it braking at
+        ``max_deceleration`` at most, never as in an emergency (it is on
+        another lane). As a leader in its place, one alongside (gap 0) had
+        the merger braking at the actuator's 9 m/s^2 (traced: 26 steps at the
+        limit in the mix at demand x2, SUMO's emergency-braking warnings),
+        and it dropped the own leader."""
+        soft = [(index.get(fid), cid, gap, "courtesy_steps") for fid, (cid, gap) in self._courtesy.items() if cid in index]
+        soft += [(index.get(vid), nid, gap, "merge_lead_steps") for vid, (nid, gap) in self._merge_leads.items()]
+        self._courtesy = {}
+        self._merge_leads = {}
+        chosen: dict[int, tuple[str, float]] = {}
+        for i, cid, gap, count in soft:
+            if i is not None:
+                # One per vehicle: of a courtesy and a lining-up target, the tighter.
+                chosen[i] = self.tighter_leader(chosen.get(i), (cid, gap))
+                self.counts[count] += 1
+        return [(i, cid, gap) for i, (cid, gap) in chosen.items()]
+
+    def tighter_leader(self, a: Any, b: tuple[str, float]) -> Any:
+        """Of two leaders (SUMO's ``(id, gap)``; ``a`` may be None or empty),
+        the one the stopping law brakes harder for: the smaller virtual
+        obstacle distance, gap plus the leader's braking distance at the
+        planning deceleration. Not simply the closer one: a near leader
+        pulling away matters less than a slower one further on, and following
+        only the near one runs into the other."""
+        if not (a and a[0] and a[1] >= -100.0):
+            return b
+        speed = self.conn.get_speed
+        two_b = 2.0 * self.plan_decel
+        da = a[1] + max(float(speed(a[0])), 0.0) ** 2 / two_b
+        db = b[1] + max(float(speed(b[0])), 0.0) ** 2 / two_b
+        return b if db < da else a
+
+    # ------------------------------------------------------------ the target lane
+    def target_lane_neighbours(self, vid: str, direction: int) -> Neighbours:
+        """SUMO's followers and leaders of ``vid`` on the lane beside it
+        (+1 left, -1 right), each as (gap in m, its speed in m/s)."""
+        v = self.conn.sumo.vehicle
+        side = 0 if direction > 0 else 1  # getNeighbors: bit 0 right, bit 1 leaders
+        followers = [(gap, float(v.getSpeed(nid))) for nid, gap in v.getNeighbors(vid, side)]
+        leaders = [(gap, float(v.getSpeed(nid))) for nid, gap in v.getNeighbors(vid, side | 2)]
+        return followers, leaders
+
+    def target_lane_clear(self, vid: str, direction: int, speed: float, duration: float, near: Neighbours | None = None) -> bool:
+        """Room on the target lane for a change lasting ``duration`` seconds:
+        the gap to the follower and to the leader there, each at least
+        ``LANE_CHANGE_GAP_M`` plus what the closing speed eats in that time.
+        ``near``: ``target_lane_neighbours`` of this step, if read already."""
+        followers, leaders = near if near is not None else self.target_lane_neighbours(vid, direction)
+        return not (
+            any(gap < LANE_CHANGE_GAP_M + duration * max(f_speed - speed, 0.0) for gap, f_speed in followers)
+            or any(gap < LANE_CHANGE_GAP_M + duration * max(speed - l_speed, 0.0) for gap, l_speed in leaders)
+        )
+
+    def tactical_room(self, vid: str, direction: int, speed: float, factor: float, near: Neighbours | None = None) -> bool:
+        """Gaps on the target lane for a change that is only wanted (see
+        ``TACTICAL_HEADWAY_S``), the headway and braking terms scaled by
+        ``factor``: 1 to start, ``TACTICAL_KEEP_FACTOR`` to go on. ``near``:
+        ``target_lane_neighbours`` of this step, if read already."""
+        followers, leaders = near if near is not None else self.target_lane_neighbours(vid, direction)
+        return not (
+            any(gap < tactical_gap(f_speed, speed, factor) for gap, f_speed in followers)
+            or any(gap < tactical_gap(speed, l_speed, factor) for gap, l_speed in leaders)
+        )
+
+    # ------------------------------------------------------------ tactical
+    def note_insertion(self, vid: str) -> None:
+        """Where SUMO inserted ``vid``: the furthest insertion point per edge."""
+        v = self.conn.sumo.vehicle
+        try:
+            edge, pos = v.getRoadID(vid), float(v.getLanePosition(vid))
+        except Exception:
+            return
+        if pos > self._insertions.get(edge, -math.inf):
+            self._insertions[edge] = pos
+
+    def tactical_changes(self, order: list[Active], step: int) -> None:
+        """This step's share of the controlled vehicles (every
+        ``TACTICAL_CHECK_EVERY``-th of ``order``, from ``step``) change lanes
+        where SUMO's lane-change model wants a change the route does not need
+        and has room for it."""
+        import traci.constants as tc
+
+        state = self.conn.lane_change_state
+        reasons = tc.LCA_SPEEDGAIN | tc.LCA_KEEPRIGHT | tc.LCA_COOPERATIVE
+        for act in order[step % TACTICAL_CHECK_EVERY :: TACTICAL_CHECK_EVERY]:
+            if act.changing is not None or self.active.get(act.vid) is not act:
+                continue
+            for direction in (1, -1):
+                try:
+                    wants, _ = state(act.vid, direction)
+                except Exception:
+                    break  # gone without an event: the runner's observe drops it
+                side = tc.LCA_LEFT if direction > 0 else tc.LCA_RIGHT
+                if wants & side and wants & reasons and not wants & (tc.LCA_BLOCKED | tc.LCA_STRATEGIC):
+                    self.try_tactical_change(act, direction)
+                    break
+
+    def try_tactical_change(self, act: Active, direction: int) -> None:
+        """Changes ``act`` one lane over (+1 left, -1 right) on its edge, if
+        the target lane goes on along the route and has room now."""
+        v = self.conn.sumo.vehicle
+        try:
+            lane_id = v.getLaneID(act.vid)
+            speed = float(v.getSpeed(act.vid))
+            pos = float(v.getLanePosition(act.vid))
+            rest = tuple(v.getRoute(act.vid))[max(int(v.getRouteIndex(act.vid)), 0) :]
+        except Exception:
+            return
+        geo = act.geo
+        edge, _, index = lane_id.rpartition("_")
+        if speed < TACTICAL_MIN_SPEED_MPS or lane_id.startswith(":") or not index.isdigit():
+            return
+        k = len(geo.edges) - len(rest)
+        if not rest or k < 0 or geo.edges[k:] != rest or rest[0] != edge:
+            return  # the track is not of the route from here (a rebuild is due)
+        if geo.pending_change is not None and geo.pending_change[0] == k:
+            return  # the route needs a change on this edge: that one first
+        if pos < self._insertions.get(edge, -math.inf) + TACTICAL_INSERTION_CLEAR_M:
+            return  # SUMO inserts vehicles just behind here (see TACTICAL_INSERTION_CLEAR_M)
+        current = int(index)
+        target = current + direction
+        lane = self.network.net().getLane(lane_id)
+        if not 0 <= target < lane.getEdge().getLaneNumber():
+            return
+        length = change_length(speed, float(lane.getLength()) - pos - 1.0)
+        if length < 8.0:
+            return
+        # Both checks of the target lane on one reading of it.
+        near = self.target_lane_neighbours(act.vid, direction)
+        if not self.target_lane_clear(act.vid, direction, speed, length / speed, near):
+            return
+        far = target + direction
+        if not self.tactical_room(act.vid, direction, speed, 1.0, near) or self.changing_into(edge, target, act.vid):
+            return
+        if 0 <= far < lane.getEdge().getLaneNumber() and not self.far_lane_room(act.vid, f"{edge}_{far}", pos, speed):
+            return
+        try:
+            geo2, track = self.tracks.geometry(rest, current, change=(pos, length, target))
+        except blendtrack.PathError:
+            return  # the target lane does not go on along the route
+        self.begin_change(act, geo2, track, direction, target, (pos, length))
+        act.tactical = True
+        self.counts["tactical_lane_changes"] += 1
+
+    def changing_into(self, edge: str, target: int, vid: str) -> bool:
+        """Is another controlled vehicle changing onto lane ``target`` of
+        ``edge`` (from the other side, say)? Neither would see the other on
+        the target lane before SUMO puts it there."""
+        v = self.conn.sumo.vehicle
+        for other in self.changing.values():
+            if other.vid != vid and other.changing is not None and other.changing[1] == target:
+                try:
+                    if v.getRoadID(other.vid) == edge:
+                        return True
+                except Exception:
+                    continue
+        return False
+
+    def far_lane_room(self, vid: str, far_lane: str, front: float, speed: float) -> bool:
+        """Gaps (``TACTICAL_KEEP_FACTOR`` of them) to the vehicles on the lane
+        beyond the target lane, checked before a change that is only wanted
+        starts: a SUMO driver there may move onto the target lane at the same
+        time, and SUMO's drivers see the changer only once SUMO has put it
+        there (a collision of one at 33 m/s, from 3.5 m behind, before this
+        check). ``front``: the changer's front on its lane."""
+        v = self.conn.sumo.vehicle
+        back = front - float(v.getLength(vid))
+        for other in self.conn.vehicles_on(far_lane):
+            o_front = float(v.getLanePosition(other))
+            o_speed = float(v.getSpeed(other))
+            if o_front <= front:
+                gap = back - o_front - float(v.getMinGap(other))
+                if gap < tactical_gap(o_speed, speed, TACTICAL_KEEP_FACTOR):
+                    return False
+            else:
+                gap = o_front - float(v.getLength(other)) - front - float(v.getMinGap(vid))
+                if gap < tactical_gap(speed, o_speed, TACTICAL_KEEP_FACTOR):
+                    return False
+        return True
+
+
+def tactical_gap(rear: float, front: float, factor: float) -> float:
+    """The gap (m) a change that is only wanted asks between a rear vehicle
+    at ``rear`` m/s and a front one at ``front`` (see ``TACTICAL_HEADWAY_S``)."""
+    rear, front = max(rear, 0.0), max(front, 0.0)
+    return LANE_CHANGE_GAP_M + factor * (TACTICAL_HEADWAY_S * rear + max(rear * rear - front * front, 0.0) / (2.0 * TACTICAL_DECEL_MPS2))
+
+
+def change_length(speed: float, room_m: float) -> float:
+    """How long (m) a lane change at ``speed`` is, with ``room_m`` of lane left."""
+    return min(max(LANE_CHANGE_S * abs(speed), LANE_CHANGE_MIN_M), LANE_CHANGE_MAX_M, room_m)
+
+
+def could_change_lane(lane_change_state: Callable[[str, int], Any], vid: str, direction: int) -> bool:
+    """TraCI's ``couldChangeLane`` on a given ``getLaneChangeState``: the
+    target lane had room at SUMO's last lane-change check (and the vehicle
+    did not just change)."""
+    import traci.constants as tc
+
+    state, traci_state = lane_change_state(vid, direction)
+    if traci_state & tc.LCA_BLOCKED == 0 and traci_state & (tc.LCA_LEFT if direction > 0 else tc.LCA_RIGHT):
+        return False  # it changed in the last step: the state no longer applies
+    return bool(state != tc.LCA_UNKNOWN and state & tc.LCA_BLOCKED == 0)

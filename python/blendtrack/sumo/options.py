@@ -1,0 +1,73 @@
+"""What a SUMO run controls and how: :class:`RunOptions` (importable from
+:mod:`blendtrack.sumo.runner` as well). A module of its own so that every
+part of the bridge can take the options without importing the runner."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from blendtrack import ControllerConfig, VehicleParams
+from blendtrack.sumo.scenario import ScenarioError
+
+
+@dataclass
+class RunOptions:
+    """What a run controls and how (see ``blendtrack sumo run --help``)."""
+
+    #: Fraction of all vehicles controlled, chosen by a seeded hash of the id.
+    controlled_fraction: float | None = None
+    #: vType whose vehicles are controlled.
+    controlled_type: str | None = None
+    #: Explicit vehicle ids to control.
+    controlled_ids: tuple[str, ...] = ()
+    #: Control at most this many vehicles (the first selected ones to depart).
+    max_controlled: int | None = None
+    #: Blend factor override for every controlled vehicle.
+    alpha: float | None = None
+    config: ControllerConfig | None = None
+    vehicle: VehicleParams | None = None
+    #: Controller keys the user set explicitly (config file, sweep): those
+    #: keep their value. Otherwise ``path_width_m`` comes from the lanes'
+    #: widths, ``preferred_speed`` from the vType's desired speed (maxSpeed x
+    #: the vehicle's speedFactor, capped by the lane's limit), and
+    #: ``max_obs_deceleration`` equals ``max_deceleration`` (why: see
+    #: ``Selection.type_info``).
+    fixed_keys: frozenset[str] = frozenset()
+    end_s: float | None = None
+    seed: int = 0
+    backend: str = "libsumo"  # or "traci"
+    gui: bool = False
+    #: Write a per-step trace of the controlled vehicles.
+    trace: bool = False
+    fcd: bool = False
+    ssm: bool = False
+    #: Extra SUMO command-line options.
+    sumo_args: tuple[str, ...] = ()
+    progress: bool = True
+    #: Keep the trajectories of this many controlled vehicles (for plots; -1 = all).
+    keep_trajectories: int = 1
+    #: Extra distance (m) kept to leaders and stop lines at standstill, on top
+    #: of SUMO's minGap (SUMO counts a gap below minGap as a collision).
+    standstill_margin_m: float = 1.0
+    #: Added (m, >= 0) to each side of every lane's half width for the
+    #: virtual borders (ignored when ``path_width_m`` is set): wider borders
+    #: let the ray cast see further through a curve, so the curvature-aware
+    #: law slows a vehicle less there.
+    border_margin_m: float = 0.0
+    #: Stop at the end of the route (a standing obstacle there). By default
+    #: controlled vehicles, like SUMO's drivers (``arrivalSpeed="current"``),
+    #: leave the network at their route's end without slowing down.
+    stop_at_route_end: bool = False
+    #: Let controlled vehicles change lanes where their route does not need
+    #: it, when SUMO's lane-change model would (to overtake, keep right or
+    #: make room): see ``lanechange.TACTICAL_CHECK_EVERY``. Off by default:
+    #: only the changes the route needs (see the README for what it does to a
+    #: merge). Experimental: tried on 2 networks and 3 seeds; on the urban
+    #: grid it adds teleports (README, known limits).
+    tactical_lane_changes: bool = False
+
+    def __post_init__(self) -> None:
+        m = self.border_margin_m
+        if not (isinstance(m, (int, float)) and math.isfinite(m) and m >= 0.0):
+            raise ScenarioError(f"border margin {m!r} m: must be a finite number >= 0")

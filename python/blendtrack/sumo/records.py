@@ -1,0 +1,79 @@
+"""What a SUMO run keeps: per-vehicle records (``vehicles.csv``), the run's
+result, and the per-step trace of the controlled vehicles (``trace.csv``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+#: trace.csv's columns; the RouteFleet step outputs they come from are TRACE_KEYS.
+TRACE_COLUMNS = ("t_s", "id", "x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "lateral_error_m", "heading_error_rad", "s_m", "curvature_per_m", "accel_mps2", "virtual_obstacle_m", "edge", "lane_index")
+TRACE_KEYS = ("x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "lateral_error_m", "heading_error_rad", "s_rear_m", "curvature_per_m", "accel_mps2", "virtual_obstacle_m")
+
+
+@dataclass
+class VehicleRecord:
+    """Per-vehicle accumulators for ``vehicles.csv``."""
+
+    vid: str
+    vtype: str
+    depart_s: float
+    end_s: float = math.nan
+    reason: str = "running"
+    steps: int = 0
+    sum_abs_e: float = 0.0
+    sum_e2: float = 0.0
+    max_abs_e: float = 0.0
+    #: |lateral error| sums at the rear and the front axle (the same points for every alpha).
+    sum_abs_e_rear: float = 0.0
+    sum_abs_e_front: float = 0.0
+    sum_eth2: float = 0.0
+    sum_v: float = 0.0
+    max_lat_acc: float = 0.0
+    sum_jerk2: float = 0.0
+    jerk_n: int = 0
+    last_acc: float = math.nan
+    distance_m: float = 0.0
+    collisions: int = 0
+    teleports: int = 0
+    red_light_violations: int = 0
+    speed_warnings: int = 0
+    reverse_warnings: int = 0
+    time_above_comfort_s: float = 0.0
+    lane_changes: int = 0
+
+
+@dataclass
+class RunResult:
+    records: list[VehicleRecord]
+    summary: dict[str, Any]
+    #: vid -> (trajectory rows (t, x, y, v, e, kappa), its reference points).
+    trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
+    #: Samples of (|curvature|, speed, |lateral error|, lateral acceleration) of controlled vehicles.
+    samples: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+
+
+class Trace:
+    """The per-step trace of every controlled vehicle (``RunOptions.trace``)."""
+
+    def __init__(self) -> None:
+        self.rows: list[tuple[Any, ...]] = []
+
+    def add(self, t: float, ids: list[str], out: dict[str, np.ndarray], edge_names: list[str]) -> None:
+        """This step's rows, from ``RouteFleet.step``'s output ``out`` (in the order of ``ids``)."""
+        cols = [out[k].tolist() for k in TRACE_KEYS]
+        edges = [edge_names[e] for e in out["edge"].tolist()]
+        for row in zip(ids, *cols, edges, out["lane_index"].tolist()):
+            self.rows.append((t, *row))
+
+    def write(self, file: Path) -> None:
+        import csv
+
+        with open(file, "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(TRACE_COLUMNS)
+            w.writerows(self.rows)

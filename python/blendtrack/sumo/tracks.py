@@ -1,0 +1,142 @@
+"""The controlled vehicles' reference tracks: each route (from a lane, with
+its lane pieces and stop lines) registered once with the RouteFleet and
+shared by every vehicle on it, a track of its own for a vehicle changing
+lanes, putting a vehicle on another track (retracking, rebuilding after a
+reroute), and SUMO's string ids interned as the integers RouteFleet takes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import blendtrack
+from blendtrack import ControllerConfig, RouteFleet
+from blendtrack.sumo.geometry import RouteGeometry, route_geometry
+from blendtrack.sumo.network import Network
+from blendtrack.sumo.records import VehicleRecord
+
+
+class Interned:
+    """String ids as small integers (RouteFleet takes integers), both ways."""
+
+    def __init__(self) -> None:
+        self.ids: dict[str, int] = {}
+        self.names: list[str] = []
+
+    def id(self, name: str) -> int:
+        i = self.ids.get(name)
+        if i is None:
+            i = self.ids[name] = len(self.names)
+            self.names.append(name)
+        return i
+
+    def get(self, name: str, default: int) -> int:
+        return self.ids.get(name, default)
+
+    def name(self, i: int) -> str:
+        return self.names[i]
+
+
+@dataclass
+class Active:
+    """A vehicle under control (its state and statistics live in the RouteFleet)."""
+
+    vid: str
+    slot: int
+    geo: RouteGeometry
+    route_id: str
+    record: VehicleRecord
+    trajectory: list[tuple[float, float, float, float, float, float]] | None = None
+    #: While a lane change is under way: (+1 left or -1 right, target lane index).
+    changing: tuple[int, int] | None = None
+    #: The change under way is one the route does not need (checked every step, see LaneChanges.changing_leader).
+    tactical: bool = False
+    #: The change under way: (SUMO lane position of the front where it
+    #: starts, its length in m) on the lane it leaves.
+    change_span: tuple[float, float] | None = None
+    #: The track built for this vehicle alone (a lane change in it), removed
+    #: from the RouteFleet once the vehicle leaves it; None on a shared track.
+    own_track: int | None = None
+
+
+class Tracks:
+    """The tracks registered with ``fleet`` and the interned lane, edge and light ids."""
+
+    def __init__(self, fleet: RouteFleet, network: Network, config: ControllerConfig, border_margin_m: float) -> None:
+        self.fleet = fleet
+        self.network = network
+        self.config = config
+        self.border_margin_m = border_margin_m
+        #: (edges, lane index) -> the shared track of that route from that lane.
+        self.geo_cache: dict[tuple[tuple[str, ...], int], tuple[RouteGeometry, int]] = {}
+        self.lanes = Interned()
+        self.edges = Interned()
+        self.lights = Interned()
+
+    def geometry(
+        self, edges: tuple[str, ...], lane_index: int, change: tuple[float, float] | tuple[float, float, int] | None = None
+    ) -> tuple[RouteGeometry, int]:
+        """The track of a route from a lane, registered with its lane pieces and
+        stop lines; shared by every vehicle on the same route and lane (a track
+        with a lane change in it belongs to one vehicle)."""
+        key = (edges, lane_index)
+        hit = self.geo_cache.get(key) if change is None else None
+        if hit is None:
+            network = self.network
+            geo = route_geometry(
+                network.net(), edges, lane_index, defer_changes=True, change=change,
+                border_margin_m=self.border_margin_m,
+            )
+            path = blendtrack.Path(geo.points, geo.widths, closed=False)
+            lanes, edge_ids = self.lanes, self.edges
+            stops = geo.stops
+            network.internal_vias.update(st[4] for st in stops if st[2] < 0)
+            track = self.fleet.add_route(
+                path,
+                self.config,
+                piece_start_m=geo.piece_start_s,
+                piece_scale=geo.piece_scale,
+                piece_offset_m=geo.piece_offset,
+                piece_lane_length_m=geo.piece_lane_length,
+                piece_lane_pos_m=geo.piece_lane_pos,
+                piece_speed_mps=geo.piece_speed,
+                piece_lane=[lanes.id(x) for x in geo.piece_lane],
+                piece_edge=[edge_ids.id(x) for x in geo.piece_edge],
+                piece_lane_index=geo.piece_index,
+                length_m=geo.length_m,
+                stop_s_m=[st[0] for st in stops],
+                stop_light=[self.lights.id(st[1]) if st[1] else -1 for st in stops],
+                stop_link=[st[2] for st in stops],
+                stop_major=[int(st[3]) for st in stops],
+                stop_via=[lanes.id(st[4]) for st in stops],
+                stop_exit_m=[st[5] for st in stops],
+                stop_check_inside=[int(bool(network.junction_lanes(st[4])[1])) for st in stops],
+                lane_change=(
+                    (edge_ids.id(geo.edges[geo.pending_change[0]]), geo.pending_change[1])
+                    if geo.pending_change is not None
+                    else None
+                ),
+            )
+            hit = (geo, track)
+            if change is None:
+                self.geo_cache[key] = hit
+        return hit
+
+    def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool) -> None:
+        """Puts ``act`` on ``track`` (``owned``: built for it alone); a track
+        it owned before goes (nobody else drives it), so a long run's lane
+        changes do not pile up tracks."""
+        self.fleet.retrack(act.slot, track)
+        old, act.own_track = act.own_track, (track if owned else None)
+        act.geo = geo
+        if old is not None and old != track:
+            self.fleet.remove_route(old)
+
+    def rebuild(self, act: Active, vehicle: Any) -> None:
+        """The route changed (rerouting): a new track from where the vehicle
+        is (``vehicle``: SUMO's vehicle domain)."""
+        route = tuple(vehicle.getRoute(act.vid))
+        idx = max(int(vehicle.getRouteIndex(act.vid)), 0)
+        geo, track = self.geometry(route[idx:], max(int(vehicle.getLaneIndex(act.vid)), 0))
+        self.retrack(act, geo, track, owned=False)
+        act.route_id = vehicle.getRouteID(act.vid)

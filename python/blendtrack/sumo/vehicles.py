@@ -1,0 +1,140 @@
+"""The controlled vehicles: taking one over from SUMO (its state from SUMO's
+pose and speed, its track, its record), letting one go (its statistics into
+its record, SUMO's own driving again), and the hot loop's lists of them in a
+fixed order."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from blendtrack import ControllerConfig, RouteFleet, VehicleParams
+from blendtrack.sumo.connection import SumoConnection
+from blendtrack.sumo.options import RunOptions
+from blendtrack.sumo.records import VehicleRecord
+from blendtrack.sumo.selection import PARAM_PREFIX, Selection
+from blendtrack.sumo.tracks import Active, Tracks
+
+# Distances of the leader look-up (m).
+LEADER_RANGE_M = 250.0
+
+
+class Controlled:
+    """The vehicles blendtrack drives, their records and kept trajectories."""
+
+    def __init__(self, conn: SumoConnection, selection: Selection, tracks: Tracks, fleet: RouteFleet, options: RunOptions) -> None:
+        self.conn = conn
+        self.selection = selection
+        self.tracks = tracks
+        self.fleet = fleet
+        self.opt = options
+        self.active: dict[str, Active] = {}
+        #: Every vehicle taken over, in the order they were.
+        self.records: list[VehicleRecord] = []
+        #: vid -> (trajectory rows (t, x, y, v, e, kappa), its reference points).
+        self.trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+        #: The vehicles keeping a trajectory.
+        self.tracing: dict[str, Active] = {}
+        #: Vehicles whose SUMO lane position is read next step (unknown to
+        #: blendtrack, or due for a check of its prediction).
+        self.read_position: set[str] = set()
+        #: The controlled vehicles in a fixed order (rebuilt when one comes or
+        #: goes), their ids, slots, and index by id: the hot loop's lists.
+        self.order: list[Active] = []
+        self.ids: list[str] = []
+        self.slots = np.zeros(0, dtype=np.int64)
+        self.index: dict[str, int] = {}
+        self._dirty = True
+
+    def refresh_order(self) -> None:
+        """The hot loop's lists again, if a vehicle came or went."""
+        if self._dirty:
+            self.order = list(self.active.values())
+            self.ids = [a.vid for a in self.order]
+            self.slots = np.array([a.slot for a in self.order], dtype=np.int64)
+            self.index = {vid: i for i, vid in enumerate(self.ids)}
+            self._dirty = False
+
+    def take_over(self, vid: str, t: float) -> None:
+        """``vid`` (just departed, selected) is driven by blendtrack from now on."""
+        v = self.conn.sumo.vehicle
+        vtype = v.getTypeID(vid)
+        info = self.selection.type_info(vtype)
+        route = tuple(v.getRoute(vid))
+        idx = max(int(v.getRouteIndex(vid)), 0)
+        edges = route[idx:]
+        if not edges:
+            return
+        lane_index = int(v.getLaneIndex(vid))
+        geo, track = self.tracks.geometry(edges, max(lane_index, 0))
+        veh: VehicleParams = info["vehicle"]
+        cfg: ControllerConfig = info["config"]
+        if "preferred_speed" not in self.opt.fixed_keys and PARAM_PREFIX + "preferred_speed" not in info["param_keys"]:
+            cfg = cfg.replace(preferred_speed=info["max_speed"] * float(v.getSpeedFactor(vid)))
+        x, y = v.getPosition(vid)
+        theta = math.pi / 2.0 - math.radians(float(v.getAngle(vid)))
+        overhang = max(0.5 * (info["length"] - veh.wheelbase_m), 0.0)
+        reach = veh.wheelbase_m + overhang
+        slot = self.fleet.add_vehicle(
+            track, cfg, veh,
+            reach_m=reach, length_m=info["length"], min_gap_m=info["min_gap"],
+            x=x - reach * math.cos(theta), y=y - reach * math.sin(theta), theta=theta, v=float(v.getSpeed(vid)),
+            name=vid,
+        )
+        rec = VehicleRecord(vid=vid, vtype=vtype, depart_s=t)
+        self.records.append(rec)
+        act = Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec)
+        if len(self.trajectories) + len(self.tracing) < self.opt.keep_trajectories or self.opt.keep_trajectories < 0:
+            act.trajectory = []
+            self.tracing[vid] = act
+        self.active[vid] = act
+        self._dirty = True
+        self.read_position.add(vid)
+        v.setSpeedMode(vid, 0)
+        v.setLaneChangeMode(vid, 0)
+        if self.conn.use_subscriptions:
+            tc = self.conn.tc
+            v.subscribe(vid, [tc.VAR_ROUTE_ID, tc.VAR_LANE_ID, tc.VAR_LANEPOSITION])
+            v.subscribeLeader(vid, LEADER_RANGE_M)
+
+    def drop(self, vid: str, t: float, reason: str) -> None:
+        """``vid`` is no longer driven by blendtrack (``reason``: arrived,
+        teleport, collision, vanished, end, ...): its statistics go into its
+        record, and unless it arrived or the run ended SUMO drives it again."""
+        act = self.active.pop(vid, None)
+        self.read_position.discard(vid)
+        if act is None:
+            return
+        self._dirty = True
+        self.tracing.pop(vid, None)
+        rec = act.record
+        for key, value in self.fleet.remove_vehicle(act.slot).items():
+            setattr(rec, key, value)
+        if act.own_track is not None:
+            self.fleet.remove_route(act.own_track)
+        rec.end_s = t
+        rec.reason = reason
+        if act.trajectory is not None and act.trajectory:
+            self.trajectories[vid] = (np.array(act.trajectory), act.geo.points)
+        if reason == "collision":
+            rec.collisions += 1
+        elif reason == "teleport":
+            rec.teleports += 1
+        if reason not in ("arrived", "end"):
+            # Hand the vehicle back to SUMO's own models if it is still there.
+            # setSpeed(-1) ends the last speed command: SUMO keeps applying
+            # one until told otherwise, even after a teleport, so a vehicle
+            # that waited at standstill would stand for good.
+            self.conn.hand_back(vid)
+
+    def note_trajectories(self, t: float, acts: list[Active], out: dict[str, np.ndarray]) -> None:
+        """This step's point of each vehicle keeping a trajectory (``out``: ``RouteFleet.step``'s, in the order of ``acts``)."""
+        if not self.tracing:
+            return
+        xf, yf, vv, ee, kk = (out[k] for k in ("x_front_m", "y_front_m", "v_mps", "lateral_error_m", "curvature_per_m"))
+        index = self.index
+        for act in self.tracing.values():
+            j = index.get(act.vid)
+            if j is not None and j < len(acts) and acts[j] is act and act.trajectory is not None:
+                act.trajectory.append((t, float(xf[j]), float(yf[j]), float(vv[j]), float(ee[j]), float(kk[j])))
