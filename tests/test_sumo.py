@@ -831,7 +831,7 @@ def _cli(*args: str) -> subprocess.CompletedProcess[str]:
     "make_args, expect",
     [
         (lambda tmp: ["sumo", "run", "no_such_scenario", "--out", str(tmp / "o")], "not found"),
-        (lambda tmp: ["sumo", "run", str(tmp), "--out", str(tmp / "o")], "no .sumocfg"),
+        (lambda tmp: ["sumo", "run", str(tmp), "--out", str(tmp / "o")], "no SUMO configuration"),
         (lambda tmp: ["sumo", "run", "rural_loop", "--controlled-type", "robot", "--out", str(tmp / "o")], "robot"),
         (lambda tmp: ["sumo", "run", "rural_loop", "--controlled-fraction", "1.5", "--out", str(tmp / "o")], "fraction"),
         (lambda tmp: ["sumo", "run", "rural_loop", "--alpha", "-0.2", "--out", str(tmp / "o")], "alpha"),

@@ -426,7 +426,7 @@ def _add_compare_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> N
             "and the runs in DIR/runs/. Ctrl-C leaves no report."
         ),
     )
-    cmp.add_argument("scenario", metavar="SCENARIO", help="scenario name or folder, or a .sumocfg file")
+    cmp.add_argument("scenario", metavar="SCENARIO", help="scenario name or folder, or a SUMO configuration file (.sumocfg, .cfg, .xml)")
     cmp.add_argument(
         "--baseline",
         choices=("krauss", "idm", "eidm", "acc"),
@@ -592,7 +592,7 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
             "[controller] or [vehicle] key for that type."
         ),
     )
-    run.add_argument("scenario", metavar="SCENARIO", help="scenario name or folder, or a .sumocfg file")
+    run.add_argument("scenario", metavar="SCENARIO", help="scenario name or folder, or a SUMO configuration file (.sumocfg, .cfg, .xml)")
     which = run.add_mutually_exclusive_group()
     which.add_argument(
         "--controlled-fraction",

@@ -1,28 +1,52 @@
 """Finding and checking a SUMO scenario before SUMO is started.
 
 A scenario is either a folder of ``sumo_scenarios/`` (by name or path), any
-folder holding a ``scenario.toml`` or exactly one ``.sumocfg``, or a
-``.sumocfg`` file a user brings. ``scenario.toml`` is optional: a user's own
-network and demand work without it. Every problem found here raises
-:class:`ScenarioError` with one line that names the file and what is wrong.
+folder holding a ``scenario.toml`` or exactly one SUMO configuration, or a
+configuration file a user brings, whatever its name (``.sumocfg``, ``.cfg``,
+``.xml``: a configuration is known by its root element). Inputs may be
+gzipped. ``scenario.toml`` is optional: a user's own network and demand work
+without it. Every problem found here raises :class:`ScenarioError` with one
+line that names the file and what is wrong.
 """
 
 from __future__ import annotations
 
 import tomllib
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from blendtrack import BlendtrackError
+from blendtrack.sumo.sumocfg import ScenarioError, SumoConfig, is_config, iter_xml
 
 #: The repository's scenario folder (present in a source checkout).
 SCENARIO_ROOT = Path(__file__).resolve().parents[3] / "sumo_scenarios"
 
 
-class ScenarioError(BlendtrackError, ValueError):
-    """A scenario that cannot be run (missing, malformed, rejected by SUMO)."""
+__all__ = ["SCENARIO_ROOT", "Scenario", "ScenarioError", "VTypes", "available_scenarios", "resolve_scenario"]
+
+#: File name patterns a folder's configuration may have.
+CONFIG_PATTERNS = ("*.sumocfg", "*.cfg", "*.xml", "*.sumocfg.gz", "*.xml.gz")
+
+
+@dataclass
+class VTypes:
+    """The vTypes a scenario defines (route and additional files), with
+    their ``<param>`` values, and its vTypeDistributions with their members."""
+
+    types: dict[str, dict[str, str]] = field(default_factory=dict)
+    distributions: dict[str, list[str]] = field(default_factory=dict)
+
+    def members(self, name: str) -> list[str] | None:
+        """The vTypes ``name`` stands for: itself, a distribution's members,
+        or ``None`` when the scenario defines no such type."""
+        if name in self.distributions:
+            return list(self.distributions[name])
+        if name in self.types or name == "DEFAULT_VEHTYPE":
+            return [name]
+        return None
+
+    def known(self) -> list[str]:
+        return sorted({*self.types, *self.distributions, "DEFAULT_VEHTYPE"})
 
 
 @dataclass
@@ -36,6 +60,31 @@ class Scenario:
     meta: dict[str, Any] = field(default_factory=dict)
     step_length_s: float = 1.0
     end_s: float | None = None
+    additional_files: list[Path] = field(default_factory=list)
+
+    def config(self) -> SumoConfig:
+        """The scenario's SUMO configuration, parsed."""
+        return SumoConfig(self.sumocfg)
+
+    def run_config(self, out_dir: Path) -> Path:
+        """Writes the configuration a run starts SUMO with into ``out_dir``
+        (see :meth:`SumoConfig.write_run_config`) and returns its path."""
+        return self.config().write_run_config(out_dir)
+
+    def vtypes(self) -> VTypes:
+        """The vTypes and vTypeDistributions of the route and additional
+        files (gzipped or not)."""
+        out = VTypes()
+        for file in [*self.route_files, *self.additional_files]:
+            for el in iter_xml(file, {"vType", "vTypeDistribution"}):
+                if el.tag == "vTypeDistribution":
+                    nested = [t.get("id", "") for t in el.findall("vType")]
+                    listed = (el.get("vTypes") or "").split()
+                    out.distributions[el.get("id", "")] = [m for m in nested + listed if m]
+                elif el.get("id"):
+                    params = {p.get("key", ""): p.get("value", "") for p in el.findall("param")}
+                    out.types[el.get("id", "")] = params
+        return out
 
     @property
     def controlled_type(self) -> str | None:
@@ -59,21 +108,8 @@ def available_scenarios() -> list[str]:
     return sorted(p.name for p in SCENARIO_ROOT.iterdir() if (p / "scenario.toml").is_file())
 
 
-def _option(root: ET.Element, section: str, name: str) -> str | None:
-    for sec in root:
-        if sec.tag == section or section == "*":
-            for opt in sec:
-                if opt.tag == name:
-                    return opt.get("value")
-    # SUMO also accepts options directly under <configuration>.
-    for opt in root:
-        if opt.tag == name:
-            return opt.get("value")
-    return None
-
-
 def resolve_scenario(spec: str | Path) -> Scenario:
-    """Turns a scenario name, folder or ``.sumocfg`` path into a checked :class:`Scenario`."""
+    """Turns a scenario name, folder or configuration file into a checked :class:`Scenario`."""
     path = Path(spec)
     if not path.exists() and SCENARIO_ROOT.joinpath(str(spec)).exists():
         path = SCENARIO_ROOT / str(spec)
@@ -95,35 +131,23 @@ def resolve_scenario(spec: str | Path) -> Scenario:
             if not sumocfg.is_file():
                 raise ScenarioError(f"{toml_file}: sumocfg {meta['sumocfg']!r} does not exist in {folder}")
         else:
-            cfgs = sorted(folder.glob("*.sumocfg"))
+            cfgs = sorted({c for pattern in CONFIG_PATTERNS for c in folder.glob(pattern) if is_config(c)})
             if len(cfgs) != 1:
-                what = "no .sumocfg" if not cfgs else f"{len(cfgs)} .sumocfg files ({', '.join(c.name for c in cfgs)})"
+                what = "no SUMO configuration" if not cfgs else f"{len(cfgs)} SUMO configurations ({', '.join(c.name for c in cfgs)})"
                 raise ScenarioError(f"{folder}: {what} and no scenario.toml saying which to run")
             sumocfg = cfgs[0]
     else:
-        if path.suffix != ".sumocfg":
-            raise ScenarioError(f"{path}: expected a scenario folder or a .sumocfg file")
         sumocfg = path
-        folder = path.parent
-    try:
-        root = ET.parse(sumocfg).getroot()
-    except ET.ParseError as e:
-        raise ScenarioError(f"{sumocfg}: malformed XML: {e}") from None
-    net = _option(root, "input", "net-file")
-    if not net:
+        folder = path.absolute().parent
+    cfg = SumoConfig(sumocfg)
+    nets = cfg.files("net-file")
+    if not nets:
         raise ScenarioError(f"{sumocfg}: no <net-file> in <input>")
-    net_file = (sumocfg.parent / net).resolve()
-    if not net_file.is_file():
-        raise ScenarioError(f"{sumocfg}: net-file {net!r} does not exist")
-    routes = _option(root, "input", "route-files") or ""
-    route_files = []
-    for r in (x.strip() for x in routes.split(",") if x.strip()):
-        rf = (sumocfg.parent / r).resolve()
-        if not rf.is_file():
-            raise ScenarioError(f"{sumocfg}: route file {r!r} does not exist")
-        route_files.append(rf)
-    step = _option(root, "time", "step-length")
-    end = _option(root, "time", "end")
+    net_file = nets[0]
+    route_files = cfg.files("route-files")
+    additional_files = cfg.files("additional-files")
+    step = cfg.option("step-length")
+    end = cfg.option("end")
     try:
         step_length = float(step) if step else 1.0
         end_s = float(end) if end else None
@@ -134,9 +158,10 @@ def resolve_scenario(spec: str | Path) -> Scenario:
     return Scenario(
         name=str(meta.get("name", folder.name if path.is_dir() else sumocfg.stem)),
         folder=folder,
-        sumocfg=sumocfg.resolve(),
+        sumocfg=sumocfg.absolute(),
         net_file=net_file,
         route_files=route_files,
+        additional_files=additional_files,
         meta=meta,
         step_length_s=step_length,
         end_s=end_s,

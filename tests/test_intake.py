@@ -1,0 +1,159 @@
+"""Scenario intake: any configuration name, gzipped inputs, vTypes wherever
+they are defined, and a run configuration that keeps every output out of
+the scenario's folder (issue 17). SUMO itself runs the written
+configurations, so what is checked is what SUMO does with them."""
+
+from __future__ import annotations
+
+import gzip
+import hashlib
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from blendtrack.sumo import ScenarioError, resolve_scenario
+from blendtrack.sumo.runner import sumo_binary
+
+REPO = Path(__file__).resolve().parents[1]
+RING = REPO / "sumo_scenarios" / "ring_single_lane"
+REAL = REPO.parent / "shared" / "scenarios_real"
+
+needs_real = pytest.mark.skipif(not REAL.is_dir(), reason="../shared/scenarios_real is not beside the repo")
+
+
+def _tree_hash(folder: Path) -> dict[str, str]:
+    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def _config(inputs: str, extra: str = "", root: str = "configuration") -> str:
+    return f'<?xml version="1.0"?>\n<{root}>\n<input>{inputs}</input>\n<time><end value="20"/><step-length value="0.5"/></time>\n{extra}\n</{root}>\n'
+
+
+def _scenario_folder(tmp_path: Path, name: str = "scn", gz: bool = False) -> Path:
+    """A small scenario of the shipped ring's network and demand, routes
+    gzipped on request, one vType distribution in an additional file and an
+    induction loop writing to a relative file."""
+    d = tmp_path / name
+    d.mkdir()
+    shutil.copy(RING / "ring_single_lane.net.xml", d / "ring.net.xml")
+    routes = (RING / "ring_single_lane.rou.xml").read_bytes()
+    if gz:
+        (d / "ring.rou.xml.gz").write_bytes(gzip.compress(routes))
+    else:
+        (d / "ring.rou.xml").write_bytes(routes)
+    add = (
+        '<additional>\n<vTypeDistribution id="mix"><vType id="calm" accel="1.0"><param key="blendtrack.controlled" value="true"/></vType>'
+        '<vType id="brisk" accel="2.5"/></vTypeDistribution>\n'
+        '<vTypeDistribution id="listed" vTypes="calm brisk"/>\n'
+        '<inductionLoop id="loop0" lane="ring_n_0" pos="10" period="10" file="det/loop0.xml"/>\n</additional>\n'
+    )
+    (d / "extra.add.xml.gz").write_bytes(gzip.compress(add.encode()))
+    return d
+
+
+def _inputs(gz: bool = False) -> str:
+    rou = "ring.rou.xml.gz" if gz else "ring.rou.xml"
+    return f'<net-file value="ring.net.xml"/><route-files value="{rou}"/><additional-files value="extra.add.xml.gz"/>'
+
+
+@pytest.mark.parametrize("name", ["run.sumocfg", "interchangeSim.cfg", "scenario.xml"])
+def test_a_configuration_is_known_by_its_content_not_its_name(tmp_path: Path, name: str) -> None:
+    d = _scenario_folder(tmp_path)
+    (d / name).write_text(_config(_inputs()))
+    for spec in (d / name, d):  # the file, and the folder holding one configuration
+        sc = resolve_scenario(spec)
+        assert sc.sumocfg == (d / name).absolute()
+        assert sc.step_length_s == 0.5 and sc.end_s == 20.0
+        assert [p.name for p in sc.additional_files] == ["extra.add.xml.gz"]
+
+
+def test_sumoConfiguration_roots_and_symlinks_are_configurations_too(tmp_path: Path) -> None:
+    d = _scenario_folder(tmp_path)
+    (d / "a.sumocfg").write_text(_config(_inputs(), root="sumoConfiguration"))
+    # A link beside it (SUMO resolves relative paths from the link's folder,
+    # as it does here).
+    link = d / "link.whatever"
+    link.symlink_to(d / "a.sumocfg")
+    assert resolve_scenario(link).net_file == (d / "ring.net.xml").absolute()
+    far = tmp_path / "far.cfg"
+    far.symlink_to(d / "a.sumocfg")
+    with pytest.raises(ScenarioError, match="net-file 'ring.net.xml' does not exist"):
+        resolve_scenario(far)
+
+
+def test_folders_with_no_or_two_configurations_and_non_configurations_are_refused(tmp_path: Path) -> None:
+    d = _scenario_folder(tmp_path)
+    with pytest.raises(ScenarioError, match="no SUMO configuration"):
+        resolve_scenario(d)
+    (d / "a.cfg").write_text(_config(_inputs()))
+    (d / "b.sumocfg").write_text(_config(_inputs()))
+    with pytest.raises(ScenarioError, match=r"2 SUMO configurations \(a\.cfg, b\.sumocfg\)"):
+        resolve_scenario(d)
+    with pytest.raises(ScenarioError, match=r"not a SUMO configuration \(root element <net>"):
+        resolve_scenario(d / "ring.net.xml")
+    (d / "broken.cfg").write_text("<configuration><input>")
+    with pytest.raises(ScenarioError, match="broken.cfg: malformed XML"):
+        resolve_scenario(d / "broken.cfg")
+    (d / "missing.cfg").write_text(_config('<net-file value="ring.net.xml"/><route-files value="nope.rou.xml"/>'))
+    with pytest.raises(ScenarioError, match="route-files 'nope.rou.xml' does not exist"):
+        resolve_scenario(d / "missing.cfg")
+
+
+def test_vtypes_come_from_gzipped_route_and_additional_files_with_distributions(tmp_path: Path) -> None:
+    d = _scenario_folder(tmp_path, gz=True)
+    (d / "run.cfg").write_text(_config(_inputs(gz=True)))
+    vt = resolve_scenario(d).vtypes()
+    assert {"auto", "human", "calm", "brisk"} <= set(vt.types)
+    assert vt.types["calm"] == {"blendtrack.controlled": "true"}
+    assert vt.members("mix") == ["calm", "brisk"]
+    assert vt.members("listed") == ["calm", "brisk"]
+    assert vt.members("human") == ["human"] and vt.members("DEFAULT_VEHTYPE") == ["DEFAULT_VEHTYPE"]
+    assert vt.members("nope") is None
+    assert "mix" in vt.known() and "nope" not in vt.known()
+
+
+def test_the_run_configuration_keeps_every_output_out_of_the_scenario(tmp_path: Path) -> None:
+    d = _scenario_folder(tmp_path, gz=True)
+    elsewhere = tmp_path / "elsewhere"
+    outputs = (
+        '<output><tripinfo-output value="data/trips.xml"/><summary-output value="'
+        f'{elsewhere}/summary.xml"/><precision value="3"/></output><report><log value="sumo.log"/></report>'
+    )
+    (d / "run.cfg").write_text(_config(_inputs(gz=True), outputs))
+    before = _tree_hash(d)
+    out = tmp_path / "out" / "sumo"
+    cfg = resolve_scenario(d / "run.cfg").run_config(out)
+    proc = subprocess.run([sumo_binary(False), "-c", str(cfg), "--no-step-log", "true"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert _tree_hash(d) == before, "SUMO wrote into the scenario folder"
+    assert not elsewhere.exists(), "an absolute output path outside --out was written"
+    for f in ("data/trips.xml", "summary.xml", "sumo.log", "det/loop0.xml"):
+        assert (out / f).is_file() and (out / f).stat().st_size > 0, f
+    # The ring's vehicles drove (nobody leaves it: the summary shows them running).
+    assert 'running="22"' in (out / "summary.xml").read_text()
+    assert 'precision value="3"' in cfg.read_text()  # a non-file <output> option is kept as it is
+
+
+def test_two_runs_of_one_scenario_share_no_file(tmp_path: Path) -> None:
+    d = _scenario_folder(tmp_path)
+    (d / "run.cfg").write_text(_config(_inputs(), '<output><tripinfo-output value="trips.xml"/></output>'))
+    sc = resolve_scenario(d)
+    a, b = sc.run_config(tmp_path / "a"), sc.run_config(tmp_path / "b")
+    files_a = {p for p in (tmp_path / "a").rglob("*") if p.is_file()}
+    files_b = {p for p in (tmp_path / "b").rglob("*") if p.is_file()}
+    assert a != b and not files_a & files_b
+    assert str(tmp_path / "a" / "trips.xml") in a.read_text() and str(tmp_path / "b" / "trips.xml") in b.read_text()
+
+
+@needs_real
+@pytest.mark.parametrize("spec", ["eccles_interchange/interchangeSim.cfg", "bologna_acosta/run.sumocfg", "bologna_acosta"])
+def test_the_public_scenarios_load_unedited_and_their_folders_stay_untouched(tmp_path: Path, spec: str) -> None:
+    sc = resolve_scenario(REAL / spec)
+    before = _tree_hash(sc.folder)
+    cfg = sc.run_config(tmp_path / "sumo")
+    proc = subprocess.run([sumo_binary(False), "-c", str(cfg), "--end", "30", "--no-step-log", "true"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert _tree_hash(sc.folder) == before
+    assert any(p.name.startswith("trip") for p in (tmp_path / "sumo").rglob("*.xml"))
