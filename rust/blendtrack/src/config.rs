@@ -53,7 +53,8 @@ pub struct ControllerConfig {
     /// b_f (m/s^2, < 0): the deceleration the stopping law plans with.
     pub max_deceleration: f64,
     /// b_l (m/s^2, < 0): the deceleration assumed for the obstacle; also the
-    /// emergency braking when no admissible plan exists (U < 0).
+    /// braking when no admissible plan exists (U < 0) while it still stops
+    /// the vehicle before the obstacle's stopping point.
     pub max_obs_deceleration: f64,
     /// Full width of the virtual corridor (m, > 0) when the path has no widths.
     pub path_width_m: f64,
@@ -95,6 +96,12 @@ pub struct ControllerConfig {
     pub border_margin_m: f64,
     /// How far along the path (m) the ray cast looks for border crossings.
     pub ray_horizon_m: f64,
+    /// The hardest braking (m/s^2, < 0) the vehicle may use when, with no
+    /// plan (U < 0), braking at `max_obs_deceleration` would not stop it
+    /// before a real obstacle's stopping point: it then brakes as hard as
+    /// stopping there needs, down to this (never gentler than b_l). A
+    /// passenger car's emergency braking is about 9 m/s^2.
+    pub emergency_deceleration: f64,
 
     // ---- Automatic alpha (beyond the paper; see `lateral::auto_alpha`) ----
     /// "fixed" (default) or "auto".
@@ -146,6 +153,7 @@ impl Default for ControllerConfig {
             pure_pursuit_gain_s: 1.0,
             pure_pursuit_min_lookahead_m: 3.0,
             use_path_widths: true,
+            emergency_deceleration: -9.0,
             border_margin_m: 0.0,
             ray_horizon_m: 200.0,
             alpha_mode: AlphaMode::Fixed,
@@ -260,6 +268,7 @@ impl ControllerConfig {
         positive("auto_alpha_preview_s", self.auto_alpha_preview_s)?;
         positive("auto_alpha_large_error_m", self.auto_alpha_large_error_m)?;
         non_negative("auto_alpha_error_gain", self.auto_alpha_error_gain)?;
+        negative("emergency_deceleration", self.emergency_deceleration)?;
         Ok(())
     }
 }

@@ -639,5 +639,4 @@ mod tests {
         }
         out
     }
-
 }

@@ -93,13 +93,46 @@ pub fn free_flow_accel(speed_abs: f64, cfg: &ControllerConfig) -> f64 {
 /// `v` is the speed along the direction of travel (>= 0), `b_f`, `b_l` < 0.
 #[inline]
 pub fn stopping_accel(v: f64, gap_m: f64, v_l: f64, s0: f64, tau: f64, b_f: f64, b_l: f64) -> f64 {
+    stopping_plan(v, gap_m, v_l, s0, tau, b_f, b_l).unwrap_or(b_l)
+}
+
+/// The stopping law's acceleration, or `None` where it has no plan (`U < 0`).
+#[inline]
+pub fn stopping_plan(
+    v: f64,
+    gap_m: f64,
+    v_l: f64,
+    s0: f64,
+    tau: f64,
+    b_f: f64,
+    b_l: f64,
+) -> Option<f64> {
     let u = (b_f * b_l * tau * tau + 4.0 * b_l * v * tau + 4.0 * v_l * v_l
         - 8.0 * b_l * (gap_m - s0))
         / (4.0 * b_f * b_l);
     if !(u >= 0.0) {
+        return None;
+    }
+    Some((b_f * tau - 2.0 * v - 2.0 * b_f * u.sqrt()) / (2.0 * tau))
+}
+
+/// Braking without a plan (`U < 0`) for a real obstacle: `b_l` while
+/// braking at `b_l` from now still stops the vehicle before the obstacle's
+/// own stopping point (`gap + v_l^2 / (-2 b_l)`, the standstill gap given up);
+/// otherwise the constant deceleration that stops it there, down to
+/// `b_emergency` (a collision is then certain at `b_l`). Never gentler than `b_l`.
+#[inline]
+pub fn emergency_accel(v: f64, gap_m: f64, v_l: f64, b_l: f64, b_emergency: f64) -> f64 {
+    let room = gap_m + v_l * v_l / (-2.0 * b_l);
+    if v * v / (-2.0 * b_l) <= room {
         return b_l;
     }
-    (b_f * tau - 2.0 * v - 2.0 * b_f * u.sqrt()) / (2.0 * tau)
+    let needed = if room > 0.0 {
+        -v * v / (2.0 * room)
+    } else {
+        f64::NEG_INFINITY
+    };
+    needed.max(b_emergency.min(b_l))
 }
 
 /// The gap beyond which a standing obstacle no longer matters: at that gap
@@ -136,16 +169,28 @@ pub fn longitudinal_accel(
     cfg: &ControllerConfig,
 ) -> LongitudinalOutput {
     let free = free_flow_accel(speed_abs, cfg);
+    // Without a plan: b_l, or harder when b_l can no longer stop the
+    // vehicle before a real obstacle (the virtual and soft ones cap it below).
     let law = |gap: f64, vl: f64| {
-        stopping_accel(
+        let vl = vl.max(0.0);
+        stopping_plan(
             speed_abs,
             gap,
-            vl.max(0.0),
+            vl,
             cfg.preferred_stop_dist,
             cfg.reaction_time,
             cfg.max_deceleration,
             cfg.max_obs_deceleration,
         )
+        .unwrap_or_else(|| {
+            emergency_accel(
+                speed_abs,
+                gap,
+                vl,
+                cfg.max_obs_deceleration,
+                cfg.emergency_deceleration,
+            )
+        })
     };
     // A curve is not an emergency: braking for the virtual obstacle stops at
     // the planning deceleration b_f; only real obstacles may demand b_l.
@@ -624,6 +669,68 @@ mod tests {
     }
 
     #[test]
+    fn without_a_plan_b_l_is_kept_while_it_still_stops_before_the_obstacle() {
+        // v = 10, standing obstacle 20 m ahead, b_l = -4: 12.5 m to stop fits.
+        assert_eq!(emergency_accel(10.0, 20.0, 0.0, -4.0, -9.0), -4.0);
+        // 1 m behind a leader at 10 m/s also braking at b_l: it stops 12.5 m
+        // on, so the vehicle has 13.5 m and needs 12.5.
+        assert_eq!(emergency_accel(10.0, 1.0, 10.0, -4.0, -9.0), -4.0);
+    }
+
+    #[test]
+    fn without_a_plan_braking_goes_as_hard_as_stopping_needs_down_to_the_emergency_limit() {
+        // v = 20, 30 m to a standing obstacle: b_l = -4 needs 50 m, so brake at
+        // v^2 / (2 * 30) = 6.67 m/s^2, which stops exactly at the obstacle.
+        let a = emergency_accel(20.0, 30.0, 0.0, -4.0, -9.0);
+        assert!((a + 400.0 / 60.0).abs() < 1e-12, "{a}");
+        assert!((20.0f64 * 20.0 / (-2.0 * a) - 30.0).abs() < 1e-9);
+        // 20 m: 10 m/s^2 would be needed; the emergency limit 9 is the most.
+        assert_eq!(emergency_accel(20.0, 20.0, 0.0, -4.0, -9.0), -9.0);
+        // Already touching: the limit. A limit gentler than b_l never weakens b_l.
+        assert_eq!(emergency_accel(5.0, 0.0, 0.0, -4.0, -9.0), -9.0);
+        assert_eq!(emergency_accel(20.0, 30.0, 0.0, -4.0, -2.0), -4.0);
+    }
+
+    #[test]
+    fn the_controller_brakes_harder_than_b_l_only_for_a_real_obstacle_without_a_plan() {
+        let cfg = ControllerConfig {
+            max_deceleration: -4.0,
+            max_obs_deceleration: -4.0,
+            preferred_stop_dist: 2.0,
+            preferred_speed: 30.0,
+            ..Default::default()
+        };
+        // 10 m/s, a standing car 6 m ahead: no plan (U < 0 below 6.5 m here),
+        // b_l would need 12.5 m: brake at 100 / 12 = 8.33 m/s^2.
+        assert!(stopping_plan(10.0, 6.0, 0.0, 2.0, 1.0, -4.0, -4.0).is_none());
+        let real = longitudinal_accel(10.0, None, &[Obstacle::new(6.0, 0.0)], &cfg);
+        assert!((real.accel_mps2 + 100.0 / 12.0).abs() < 1e-12, "{real:?}");
+        // The same distance as the virtual obstacle (a curve) or a soft one: b_f at most.
+        let virt = longitudinal_accel(10.0, Some(6.0), &[], &cfg);
+        assert_eq!(virt.accel_mps2, -4.0);
+        let soft = longitudinal_accel(10.0, None, &[Obstacle::soft(6.0, 0.0)], &cfg);
+        assert_eq!(soft.accel_mps2, -4.0);
+        // With a plan nothing changes: the law's value.
+        let far = longitudinal_accel(20.0, None, &[Obstacle::new(120.0, 0.0)], &cfg);
+        assert_eq!(
+            far.accel_mps2,
+            cfg_law(&cfg, 20.0, 120.0).min(free_flow_accel(20.0, &cfg))
+        );
+    }
+
+    fn cfg_law(cfg: &ControllerConfig, v: f64, gap: f64) -> f64 {
+        stopping_accel(
+            v,
+            gap,
+            0.0,
+            cfg.preferred_stop_dist,
+            cfg.reaction_time,
+            cfg.max_deceleration,
+            cfg.max_obs_deceleration,
+        )
+    }
+
+    #[test]
     fn free_flow_and_comfort_bound() {
         let cfg = ControllerConfig::default();
         assert_eq!(free_flow_accel(0.0, &cfg), 1.0);
@@ -689,8 +796,10 @@ mod tests {
         assert_eq!(stopping_accel(25.0, 5.0, 0.0, 0.0, 1.0, -4.0, -8.0), -8.0);
         let curve = longitudinal_accel(25.0, Some(5.0), &[], &cfg);
         assert_eq!(curve.accel_mps2, cfg.max_deceleration);
+        // A real one without a plan that b_l cannot stop short of: 25^2 / 10
+        // would be needed, so the emergency limit.
         let wall = longitudinal_accel(25.0, None, &[Obstacle::new(5.0, 0.0)], &cfg);
-        assert_eq!(wall.accel_mps2, cfg.max_obs_deceleration);
+        assert_eq!(wall.accel_mps2, cfg.emergency_deceleration);
         let leader = longitudinal_accel(
             3.0,
             None,
@@ -725,8 +834,9 @@ mod tests {
             longitudinal_accel(v, None, &[o], &cfg).accel_mps2
         };
         assert!((at(boundary, false) - (b / 2.0 - v / tau)).abs() < 1e-9);
-        // Not monotone for a real obstacle: a little closer, no plan, b_l.
-        assert_eq!(at(boundary - 0.1, false), cfg.max_obs_deceleration);
+        // Not monotone for a real obstacle: a little closer there is no plan,
+        // and b_l cannot stop short of it (256 / 14.8 needed): the emergency limit.
+        assert_eq!(at(boundary - 0.1, false), cfg.emergency_deceleration);
         // A soft one never asks for more than b_f, at any gap or unreadable...
         for gap in [-2.0, 0.0, 3.0, boundary, 12.0, 20.0, f64::NAN] {
             assert_eq!(at(gap, true), cfg.max_deceleration, "gap {gap}");
