@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from blendtrack.sumo import ScenarioError, resolve_scenario
-from blendtrack.sumo.runner import sumo_binary
+from blendtrack.sumo.connection import sumo_binary
 
 REPO = Path(__file__).resolve().parents[1]
 RING = REPO / "sumo_scenarios" / "ring_single_lane"
@@ -157,3 +157,69 @@ def test_the_public_scenarios_load_unedited_and_their_folders_stay_untouched(tmp
     assert proc.returncode == 0, proc.stderr
     assert _tree_hash(sc.folder) == before
     assert any(p.name.startswith("trip") for p in (tmp_path / "sumo").rglob("*.xml"))
+
+
+def _cli(*args: str, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    import os
+    import sys
+
+    full = {**os.environ, **(env or {})}
+    for k in [k for k, v in full.items() if v == ""]:
+        del full[k]
+    return subprocess.run([sys.executable, "-m", "blendtrack.cli", *args], capture_output=True, text=True, timeout=300, env=full)
+
+
+def _one_line_error(proc: subprocess.CompletedProcess[str], expect: str) -> None:
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and expect in lines[0], proc.stderr
+
+
+def test_gui_without_a_display_is_a_one_line_error(tmp_path: Path) -> None:
+    proc = _cli("sumo", "run", "rural_loop", "--gui", "--end", "5", "--out", str(tmp_path / "o"), env={"DISPLAY": "", "WAYLAND_DISPLAY": ""})
+    _one_line_error(proc, "--gui needs a display")
+
+
+def test_selections_that_match_nothing_are_errors_naming_what_exists(tmp_path: Path) -> None:
+    d = _scenario_folder(tmp_path)
+    (d / "run.cfg").write_text(_config(_inputs()))
+    out = str(tmp_path / "o")
+    # A type nobody drives, an unknown type, and no selector where no vType is marked.
+    _one_line_error(_cli("sumo", "run", str(d), "--controlled-type", "brisk", "--out", out), "no vehicle of scn is of that type (its vehicles' types: auto, human)")
+    _one_line_error(_cli("sumo", "run", str(d), "--controlled-type", "nope", "--out", out), "no such vType or vTypeDistribution")
+    # The ring marks 'auto'; strip the mark: nothing selects a vehicle.
+    routes = (d / "ring.rou.xml").read_text().replace('<param key="blendtrack.controlled" value="true"/>', "")
+    (d / "ring.rou.xml").write_text(routes)
+    _one_line_error(_cli("sumo", "run", str(d), "--out", out), "nothing selects a vehicle to control")
+
+
+def test_a_distribution_selects_its_members_and_unknown_params_are_named(tmp_path: Path) -> None:
+    d = _scenario_folder(tmp_path)
+    routes = (d / "ring.rou.xml").read_text().replace('type="human"', 'type="mix"', 3)
+    (d / "ring.rou.xml").write_text(routes)
+    (d / "run.cfg").write_text(_config(_inputs()))
+    before = _tree_hash(d)
+    proc = _cli("sumo", "run", str(d), "--controlled-type", "mix", "--end", "10", "--quiet", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 0, proc.stderr
+    import json
+
+    summary = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert summary["controlled_vehicles"] == 3  # the three vehicles drawn from 'mix', nobody else
+    assert _tree_hash(d) == before, "the run wrote into the scenario folder"
+    assert (tmp_path / "o" / "sumo" / "det" / "loop0.xml").is_file()  # the scenario's detector output, redirected
+    # A misspelt blendtrack.* parameter is an error naming it, not ignored.
+    add = gzip.decompress((d / "extra.add.xml.gz").read_bytes()).decode()
+    add = add.replace('<vType id="brisk" accel="2.5"/>', '<vType id="brisk" accel="2.5"><param key="blendtrack.lat_blend_fator" value="0.3"/></vType>')
+    (d / "extra.add.xml.gz").write_bytes(gzip.compress(add.encode()))
+    proc = _cli("sumo", "run", str(d), "--controlled-type", "mix", "--end", "10", "--quiet", "--out", str(tmp_path / "o2"))
+    _one_line_error(proc, "unknown parameter 'blendtrack.lat_blend_fator' (did you mean blendtrack.lat_blend_factor?)")
+
+
+@needs_real
+def test_sumo_run_on_the_eccles_cfg_leaves_the_public_folder_untouched(tmp_path: Path) -> None:
+    sc = resolve_scenario(REAL / "eccles_interchange" / "interchangeSim.cfg")
+    before = _tree_hash(sc.folder)
+    proc = _cli("sumo", "run", str(sc.sumocfg), "--controlled-fraction", "0.3", "--end", "30", "--quiet", "--out", str(tmp_path / "o"))
+    assert proc.returncode == 0, proc.stderr
+    assert _tree_hash(sc.folder) == before
+    assert (tmp_path / "o" / "sumo" / "data" / "vehicle_routes.xml").is_file()  # its own output, under --out

@@ -99,7 +99,7 @@ def _seed(text: str) -> int:
 
 
 def _alpha_value(text: str) -> float | str:
-    """argparse type of ``sim --alpha``: a number in [0, 1] or ``auto``."""
+    """argparse type of ``--alpha``: a number in [0, 1] or ``auto``."""
     if text.strip().lower() == "auto":
         return "auto"
     value: float = _finite("alpha", 0.0, high=1.0)(text)
@@ -441,7 +441,7 @@ def _add_compare_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> N
         help="control this fraction of all vehicles, chosen by a seeded hash of their ids (0..1)",
     )
     which.add_argument("--controlled-type", metavar="T", help="control every vehicle of vType T (default: vTypes with blendtrack.controlled=true)")
-    cmp.add_argument("--alpha", type=_finite("alpha", 0.0, high=1.0), metavar="A", help="blend factor for every controlled vehicle")
+    cmp.add_argument("--alpha", type=_alpha_value, metavar="A", help="blend factor for every controlled vehicle, or 'auto' (chosen every step)")
     cmp.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
     _add_driving_options(cmp)
     cmp.add_argument("--seeds", type=_seeds, default=3, metavar="N", help="run seeds 0..N-1 (default 3)")
@@ -604,7 +604,7 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
     which.add_argument(
         "--controlled-ids", metavar="IDS", action="append", help="control these vehicle ids (comma-separated, repeatable)"
     )
-    run.add_argument("--alpha", type=_finite("alpha", 0.0, high=1.0), metavar="A", help="blend factor for every controlled vehicle (0 = rear axle, 1 = front axle)")
+    run.add_argument("--alpha", type=_alpha_value, metavar="A", help="blend factor for every controlled vehicle (0 = rear axle, 1 = front axle), or 'auto' (chosen every step from direction, speed, curvature ahead and errors)")
     run.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
     _add_driving_options(run)
     run.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")

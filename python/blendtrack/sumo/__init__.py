@@ -52,13 +52,14 @@ def run_scenario(scenario: Scenario, options: RunOptions, out: str | os.PathLike
     pickle through their TOML).
     """
     from blendtrack.sumo.connection import libsumo_started
-    from blendtrack.sumo.preflight import check_controlled_ids, reconcile_sumo_args
+    from blendtrack.sumo.preflight import check_controlled_ids, check_selection, reconcile_sumo_args
 
     if not isinstance(out, (str, os.PathLike)):
         raise TypeError(f"run_scenario: out must be a folder path (str or os.PathLike), not {type(out).__name__}")
     out = Path(out)
     options = reconcile_sumo_args(options)
     check_controlled_ids(scenario, options)
+    check_selection(scenario, options)
     uses_libsumo = options.backend == "libsumo" and not options.gui
     if uses_libsumo and libsumo_started():
         return _run_in_child(scenario, options, out)

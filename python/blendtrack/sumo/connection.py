@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import math
 import os
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -71,8 +72,6 @@ def loads_ok_marker(scenario: Scenario, binary: str, sumo_args: tuple[str, ...] 
     ``$BLENDTRACK_CACHE_DIR`` (default ``~/.cache/blendtrack``). Any change to
     them is another name, so the child check runs again. None when a file
     cannot be read (no caching)."""
-    import xml.etree.ElementTree as ET
-
     try:
         h = hashlib.sha256()
         st = os.stat(binary)
@@ -80,19 +79,13 @@ def loads_ok_marker(scenario: Scenario, binary: str, sumo_args: tuple[str, ...] 
         cfg = scenario.sumocfg
         h.update(cfg.read_bytes())
         h.update(("\n".join(sumo_args) + "\n").encode())
-        files = {scenario.net_file, *scenario.route_files}
-        inputs = ET.parse(cfg).getroot().find("input")
-        for opt in inputs if inputs is not None else ():
-            for part in opt.get("value", "").replace(",", " ").split():
-                f = (cfg.parent / part).resolve()
-                if f.is_file():
-                    files.add(f)
+        files = {scenario.net_file, *scenario.route_files, *scenario.additional_files}
         for f in sorted(files):
             h.update(f"\n{f}\n".encode())
             with open(f, "rb") as fh:
                 for chunk in iter(lambda: fh.read(1 << 20), b""):
                     h.update(chunk)
-    except (OSError, ET.ParseError):
+    except OSError:
         return None
     return _cache_dir() / "sumo-loads-ok" / h.hexdigest()
 
@@ -125,10 +118,24 @@ class SumoConnection:
         self.lane_vehicles: Any = None
         #: Lanes' vehicle lists read this step (several vehicles ask about one junction).
         self._lane_ids: dict[str, Any] = {}
+        self._tmp: tempfile.TemporaryDirectory[str] | None = None
+
+    def _sumo_dir(self) -> Path:
+        """Where SUMO writes: ``OUT/sumo``, or a temporary folder for a run
+        with no output folder (removed on close)."""
+        if self.out_dir is not None:
+            return self.out_dir / "sumo"
+        if self._tmp is None:
+            self._tmp = tempfile.TemporaryDirectory(prefix="blendtrack-sumo-")
+        return Path(self._tmp.name)
 
     def command(self) -> list[str]:
-        """The ``sumo`` command line of the run."""
-        cmd = [sumo_binary(self.opt.gui), "-c", str(self.scenario.sumocfg), "--seed", str(self.opt.seed)]
+        """The ``sumo`` command line of the run. SUMO reads the run's own copy
+        of the configuration (``Scenario.run_config``): the scenario's inputs
+        by absolute path and every output it configures under the run's
+        folder, so nothing is written into the scenario's folder."""
+        cfg = self.scenario.run_config(self._sumo_dir())
+        cmd = [sumo_binary(self.opt.gui), "-c", str(cfg), "--seed", str(self.opt.seed)]
         cmd += ["--no-step-log", "true", "--duration-log.disable", "true"]
         if self.out_dir is not None:
             sd = self.out_dir / "sumo"
@@ -152,6 +159,11 @@ class SumoConnection:
     def start(self) -> None:
         global _LIBSUMO_STARTED
         _sumo_home()
+        if self.opt.gui and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise ScenarioError(
+                "--gui needs a display and none is set (DISPLAY and WAYLAND_DISPLAY are empty): "
+                "run without --gui, or under a virtual display (xvfb-run)"
+            )
         self.backend = "traci" if (self.opt.backend == "traci" or self.opt.gui) else "libsumo"
         if self.backend == "libsumo" and _LIBSUMO_STARTED:
             # libsumo 1.28 keeps state across simulations in one process: a
@@ -204,11 +216,13 @@ class SumoConnection:
             ]
         )
         types = set(self.sumo.vehicletype.getIDList())
-        if self.opt.controlled_type is not None and self.opt.controlled_type not in types:
+        t = self.opt.controlled_type
+        if t is not None and t not in types and self.scenario.vtypes().members(t) is None:
             self.close()
+            known = sorted(types | set(self.scenario.vtypes().distributions))
             raise ScenarioError(
-                f"--controlled-type {self.opt.controlled_type!r}: no such vType in {self.scenario.sumocfg.name} "
-                f"(known: {', '.join(sorted(types))})"
+                f"--controlled-type {t!r}: no such vType or vTypeDistribution in {self.scenario.sumocfg.name} "
+                f"(known: {', '.join(known)})"
             )
         lights = self.sumo.trafficlight.getIDList()
         for tls in lights:
@@ -261,9 +275,10 @@ class SumoConnection:
         # the check's quiet flags, and the check's --end 0 replaces theirs.
         quiet = ["--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
         opts = override_options(override_options(quiet, list(self.opt.sumo_args)), ["--end", "0"])
-        cmd = [binary, "-c", str(self.scenario.sumocfg), *opts]
         try:
-            proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+            with tempfile.TemporaryDirectory(prefix="blendtrack-check-") as tmp:
+                cmd = [binary, "-c", str(self.scenario.run_config(Path(tmp))), *opts]
+                proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
         except (OSError, subprocess.TimeoutExpired) as e:
             raise ScenarioError(f"{self.scenario.sumocfg}: cannot run SUMO to check the scenario: {e}") from None
         if proc.returncode != 0:
@@ -287,6 +302,9 @@ class SumoConnection:
             except Exception:
                 pass
             self.sumo = None
+        if self._tmp is not None:
+            self._tmp.cleanup()
+            self._tmp = None
 
     def time(self) -> float:
         """SUMO's simulation time, NaN once closed (or when SUMO cannot say)."""

@@ -24,7 +24,8 @@ class RunOptions:
     #: Control at most this many vehicles (the first selected ones to depart).
     max_controlled: int | None = None
     #: Blend factor override for every controlled vehicle.
-    alpha: float | None = None
+    #: A fixed blend factor for every controlled vehicle, or "auto" (alpha_mode auto).
+    alpha: float | str | None = None
     config: ControllerConfig | None = None
     vehicle: VehicleParams | None = None
     #: Controller keys the user set explicitly (config file, sweep): those

@@ -6,6 +6,11 @@
   id the scenario never declares is named in a warning, and a selection of
   none of its vehicles is an error naming some that exist (it would run
   with 0 controlled vehicles and look like a success).
+- :func:`check_selection`: a ``--controlled-type`` (a vType or a
+  vTypeDistribution, which selects its members) that no vehicle of the
+  scenario has, or no selector at all in a scenario with no vType marked
+  ``blendtrack.controlled``, is an error naming what exists: the run would
+  control nobody and look like a success.
 - :func:`reconcile_sumo_args`: ``--sumo-args`` options that blendtrack also
   sets. ``--end`` given there wins (the run loop stops there too, not only
   SUMO); given both ways with different values, or ``--seed`` (which also
@@ -22,6 +27,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from blendtrack.sumo.scenario import Scenario, ScenarioError
+from blendtrack.sumo.selection import CONTROLLED_PARAM
+from blendtrack.sumo.sumocfg import iter_xml
 
 if TYPE_CHECKING:
     from blendtrack.sumo.runner import RunOptions
@@ -31,23 +38,65 @@ if TYPE_CHECKING:
 _DEMAND_OPTIONS = ("route-files", "r", "additional-files", "a")
 
 
+_DEMAND_TAGS = {"vehicle", "trip", "flow"}
+
+
+def _demand(route_files: Sequence[Path]) -> list[ET.Element] | None:
+    """The vehicle, trip and flow elements of ``route_files`` (gzipped or
+    not); None if one cannot be read (then nothing can be said)."""
+    try:
+        return [el for file in route_files for el in iter_xml(file, _DEMAND_TAGS)]
+    except ScenarioError:
+        return None
+
+
 def declared_ids(route_files: Sequence[Path]) -> tuple[set[str], set[str]] | None:
     """(vehicle and trip ids, flow ids) declared in ``route_files``; None if
     one cannot be read (then nothing can be said about ids)."""
-    vehicles: set[str] = set()
-    flows: set[str] = set()
-    try:
-        for file in route_files:
-            for _, el in ET.iterparse(file):
-                vid = el.get("id")
-                if vid is not None and el.tag in ("vehicle", "trip"):
-                    vehicles.add(vid)
-                elif vid is not None and el.tag == "flow":
-                    flows.add(vid)
-                el.clear()
-    except (OSError, ET.ParseError):
+    demand = _demand(route_files)
+    if demand is None:
         return None
+    vehicles = {el.get("id", "") for el in demand if el.tag in ("vehicle", "trip") and el.get("id") is not None}
+    flows = {el.get("id", "") for el in demand if el.tag == "flow" and el.get("id") is not None}
     return vehicles, flows
+
+
+def check_selection(scenario: Scenario, options: RunOptions) -> None:
+    """Raises :class:`ScenarioError` when the selection can match no vehicle
+    of the scenario (see the module docs); says nothing where the route
+    files cannot tell (demand added through ``--sumo-args``)."""
+    o = options
+    if o.controlled_ids or o.controlled_fraction is not None:
+        return
+    if _option_names(o.sumo_args) & set(_DEMAND_OPTIONS):
+        return
+    vtypes = scenario.vtypes()
+    demand = _demand(scenario.route_files)
+    if demand is None:
+        return
+    used: set[str] = set()
+    for el in demand:
+        used.update(vtypes.members(el.get("type", "DEFAULT_VEHTYPE")) or [el.get("type", "DEFAULT_VEHTYPE")])
+    if o.controlled_type is not None:
+        members = vtypes.members(o.controlled_type)
+        if members is None:
+            raise ScenarioError(
+                f"--controlled-type {o.controlled_type!r}: no such vType or vTypeDistribution in "
+                f"{scenario.sumocfg.name} (known: {', '.join(vtypes.known())})"
+            )
+        if not used & set(members):
+            raise ScenarioError(
+                f"--controlled-type {o.controlled_type!r}: no vehicle of {scenario.name} is of that type "
+                f"(its vehicles' types: {', '.join(sorted(used)) or 'none'})"
+            )
+        return
+    marked = {t for t, params in vtypes.types.items() if params.get(CONTROLLED_PARAM, "").strip().lower() in ("1", "true", "yes")}
+    if not marked & used:
+        raise ScenarioError(
+            f"{scenario.name}: nothing selects a vehicle to control: no vType of its vehicles carries "
+            f"<param key=\"{CONTROLLED_PARAM}\" value=\"true\"/>; choose with --controlled-fraction P, "
+            f"--controlled-type T or --controlled-ids (its vehicles' types: {', '.join(sorted(used)) or 'none'})"
+        )
 
 
 def _option_names(args: Sequence[str]) -> set[str]:

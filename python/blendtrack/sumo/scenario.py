@@ -73,7 +73,10 @@ class Scenario:
 
     def vtypes(self) -> VTypes:
         """The vTypes and vTypeDistributions of the route and additional
-        files (gzipped or not)."""
+        files (gzipped or not), read once."""
+        cached: VTypes | None = self.__dict__.get("_vtypes")
+        if cached is not None:
+            return cached
         out = VTypes()
         for file in [*self.route_files, *self.additional_files]:
             for el in iter_xml(file, {"vType", "vTypeDistribution"}):
@@ -84,6 +87,7 @@ class Scenario:
                 elif el.get("id"):
                     params = {p.get("key", ""): p.get("value", "") for p in el.findall("param")}
                     out.types[el.get("id", "")] = params
+        self.__dict__["_vtypes"] = out
         return out
 
     @property

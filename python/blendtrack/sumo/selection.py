@@ -60,9 +60,16 @@ class Selection:
             use_path_widths="path_width_m" not in options.fixed_keys
         )
         self.base_vehicle = options.vehicle or VehicleParams()
-        if options.alpha is not None:
-            self.base_config = self.base_config.replace(lat_blend_factor=options.alpha)
+        if options.alpha == "auto":
+            self.base_config = self.base_config.replace(alpha_mode="auto")
+        elif options.alpha is not None:
+            self.base_config = self.base_config.replace(lat_blend_factor=options.alpha, alpha_mode="fixed")
         self._types: dict[str, dict[str, Any]] = {}
+        #: The vTypes --controlled-type stands for (a distribution: its members).
+        self.controlled_types: set[str] = set()
+        if options.controlled_type is not None:
+            members = conn.scenario.vtypes().members(options.controlled_type)
+            self.controlled_types = set(members or [options.controlled_type])
 
     def type_info(self, vtype: str) -> dict[str, Any]:
         """The controller, vehicle and SUMO sizes of ``vtype``."""
@@ -85,7 +92,13 @@ class Selection:
                 target[key] = parse_like(raw, current)
             except ValueError:
                 raise ScenarioError(f"vType {vtype!r}: param {PARAM_PREFIX + key} = {raw!r} is not a valid {type(current).__name__}") from None
+        self._check_param_names(vtype, cfg_keys | veh_keys)
         param_keys = {PARAM_PREFIX + k for k in (*overrides, *vehicle_overrides)}
+        # The hardest braking without a plan: the vType's own emergency
+        # deceleration, unless set explicitly.
+        emergency = float(vt.getEmergencyDecel(vtype))
+        if "emergency_deceleration" not in self.opt.fixed_keys and "emergency_deceleration" not in overrides and emergency > 0:
+            overrides["emergency_deceleration"] = -emergency
         # max_obs_deceleration in SUMO runs, unless set explicitly
         # (RunOptions.fixed_keys or a blendtrack.* vType param): the paper assumes an
         # obstacle braking at 8 m/s^2 while the vehicle plans with 4, which at 33 m/s
@@ -122,6 +135,21 @@ class Selection:
         self._types[vtype] = info
         return info
 
+    def _check_param_names(self, vtype: str, keys: set[str]) -> None:
+        """A ``blendtrack.*`` parameter of ``vtype`` that names no key is an
+        error naming it and the closest key (a typo would be ignored)."""
+        import difflib
+
+        declared = self.conn.scenario.vtypes().types.get(vtype, {})
+        for name in declared:
+            if not name.startswith(PARAM_PREFIX) or name == CONTROLLED_PARAM:
+                continue
+            key = name[len(PARAM_PREFIX):]
+            if key not in keys:
+                close = difflib.get_close_matches(key, sorted(keys), n=1)
+                hint = f" (did you mean {PARAM_PREFIX + close[0]}?)" if close else ""
+                raise ScenarioError(f"vType {vtype!r}: unknown parameter {name!r}{hint}")
+
     def is_selected(self, vid: str, vtype: str, n_controlled: int) -> bool:
         """Is ``vid`` (of ``vtype``) to be controlled, ``n_controlled`` being taken over so far?"""
         o = self.opt
@@ -132,5 +160,5 @@ class Selection:
         if o.controlled_fraction is not None:
             return unit_hash(o.seed, vid) < o.controlled_fraction
         if o.controlled_type is not None:
-            return vtype == o.controlled_type
+            return vtype in self.controlled_types
         return bool(self.type_info(vtype)["controlled_param"])
