@@ -365,6 +365,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         border_margin_m=args.border_margin,
         stop_at_route_end=args.stop_at_route_end,
         tactical_lane_changes=args.tactical_lane_changes,
+        sumo_args=args.sumo_args,
     )
     opts = compare.CompareOptions(
         baseline=args.baseline,
@@ -446,6 +447,13 @@ def _add_compare_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> N
     _add_driving_options(cmp)
     cmp.add_argument("--seeds", type=_seeds, default=3, metavar="N", help="run seeds 0..N-1 (default 3)")
     cmp.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
+    cmp.add_argument(
+        "--sumo-args",
+        type=_sumo_args,
+        default=(),
+        metavar="'OPTS'",
+        help="extra options for SUMO itself in both runs of every pair, one quoted string (as for sumo run)",
+    )
     cmp.add_argument("--quiet", action="store_true", help="no progress bar")
     cmp.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
     cmp.set_defaults(run=_cmd_compare)

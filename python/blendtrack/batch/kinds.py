@@ -176,7 +176,7 @@ def run_compare(task: dict[str, Any], work: Path) -> dict[str, float | None]:
     )
     end_s = opts.end_s if opts.end_s is not None else scenario.default_end_s
     sc = compare.with_model(scenario, opts.baseline, work / "model")
-    compare.run_baseline(sc, seed, end_s, work / "baseline")
+    compare.run_baseline(sc, seed, end_s, work / "baseline", opts.run.sumo_args)
     ropt = dataclasses.replace(opts.run, seed=seed, end_s=end_s)
     treat = compare.run_treatment(sc, ropt, work / "treatment")
     controlled = {r.vid for r in treat.records}

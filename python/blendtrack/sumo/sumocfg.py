@@ -169,14 +169,29 @@ class SumoConfig:
         ``out_dir/additional/`` with their outputs under ``out_dir``."""
         out_dir = Path(out_dir).absolute()
         out_dir.mkdir(parents=True, exist_ok=True)
+        extra = {"additional-files": [_run_additional(p, out_dir) for p in self.files("additional-files")]}
+        return self._write(out_dir / name, out_dir, extra)
+
+    def write_copy(self, target: Path, replace: dict[str, list[Path]]) -> Path:
+        """Writes a copy of this configuration to ``target`` with every input
+        by absolute path and the file lists of ``replace`` (option name ->
+        files) in place of its own; outputs are left as they are (relative
+        ones then land beside the copy, or under a run's folder once
+        :meth:`write_run_config` is applied to it)."""
+        target = Path(target).absolute()
+        target.parent.mkdir(parents=True, exist_ok=True)
+        return self._write(target, None, replace)
+
+    def _write(self, target: Path, out_dir: Path | None, replace: dict[str, list[Path]]) -> Path:
         root = ET.Element("configuration")
         sections: dict[str, ET.Element] = {}
         for section, el in self._options():
             value = el.get("value") or ""
-            if el.tag == "additional-files":
-                value = ",".join(str(_run_additional(p, out_dir)) for p in self.files("additional-files"))
+            if el.tag in replace:
+                value = ",".join(str(p) for p in replace[el.tag])
             elif _is_output(el.tag):
-                value = ",".join(str(_redirect(item, out_dir)) for item in _split(value))
+                if out_dir is not None:
+                    value = ",".join(str(_redirect(item, out_dir)) for item in _split(value))
             else:
                 value = self._absolute_inputs(value)
             if not section:
@@ -186,7 +201,6 @@ class SumoConfig:
             else:
                 parent = sections[section] = ET.SubElement(root, section)
             ET.SubElement(parent, el.tag, {"value": value})
-        target = out_dir / name
         ET.ElementTree(root).write(target, encoding="utf-8", xml_declaration=True)
         return target
 

@@ -70,11 +70,14 @@ def compare(scenario: Scenario, opts: CompareOptions, out: Path) -> list[dict[st
     """Runs every seed's baseline and treatment and writes the report into ``out``."""
     from tqdm import tqdm
 
-    if opts.controlled_type is not None:
-        known = set(vtype_params(scenario.route_files)) | {"DEFAULT_VEHTYPE"}
-        if opts.controlled_type not in known:
-            raise ScenarioError(f"--controlled-type {opts.controlled_type!r}: no such vType in {scenario.sumocfg.name} "
-                                f"(known: {', '.join(sorted(known))})")
+    from blendtrack.sumo.preflight import check_selection, reconcile_sumo_args
+
+    # The same pre-run checks as sumo run (one intake for both).
+    opts = dataclasses.replace(opts, run=reconcile_sumo_args(opts.run))
+    if opts.end_s is None and opts.run.end_s is not None:  # --end given in --sumo-args
+        opts = dataclasses.replace(opts, end_s=opts.run.end_s)
+    check_selection(scenario, dataclasses.replace(opts.run, controlled_fraction=opts.controlled_fraction,
+                                                  controlled_type=opts.controlled_type))
     # SUMO resolves relative output paths against the .sumocfg's folder.
     out = out.resolve()
     out.mkdir(parents=True, exist_ok=True)
@@ -91,7 +94,7 @@ def compare(scenario: Scenario, opts: CompareOptions, out: Path) -> list[dict[st
             for seed in range(opts.seeds):
                 rd = work / "runs" / f"seed{seed}"
                 bar.set_postfix_str(f"seed {seed} baseline")
-                run_baseline(sc, seed, end_s, rd / "baseline")
+                run_baseline(sc, seed, end_s, rd / "baseline", opts.run.sumo_args)
                 bar.update()
                 bar.set_postfix_str(f"seed {seed} treatment")
                 ropt = dataclasses.replace(opts.run, controlled_fraction=opts.controlled_fraction,

@@ -13,10 +13,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from blendtrack.sumo.connection import sumo_binary
+from blendtrack.sumo.connection import override_options, sumo_binary
 from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 from blendtrack.sumo.selection import CONTROLLED_PARAM, unit_hash
+from blendtrack.sumo.sumocfg import read_xml
 
 #: Car-following models a baseline can use ("krauss" = as the scenario says).
 MODELS = {"krauss": None, "idm": "IDM", "eidm": "EIDM", "acc": "ACC"}
@@ -36,45 +37,42 @@ class CompareOptions:
 
 
 
-def vtype_params(route_files: Sequence[Path]) -> dict[str, dict[str, str]]:
-    """vType id -> its params, from the route files."""
-    out: dict[str, dict[str, str]] = {}
-    for rf in route_files:
-        try:
-            root = ET.parse(rf).getroot()
-        except ET.ParseError as e:
-            raise ScenarioError(f"{rf}: malformed XML: {e}") from None
-        for vt in root.iter("vType"):
-            out[vt.get("id", "")] = {p.get("key", ""): p.get("value", "") for p in vt.iter("param")}
-    return out
+def vtype_params(scenario: Scenario) -> dict[str, dict[str, str]]:
+    """vType id -> its params, wherever the scenario defines them (route and
+    additional files, gzipped or not): the runner's own reading."""
+    return scenario.vtypes().types
 
 
 def with_model(scenario: Scenario, model: str, tmp: Path) -> Scenario:
-    """The scenario with every vType's carFollowModel set to ``model``: copies
-    of the route files and of the sumocfg (input paths made absolute) in ``tmp``."""
+    """The scenario with every vType's carFollowModel set to ``model``,
+    wherever the vType is defined (route or additional file): rewritten
+    copies of those files and a configuration naming them in ``tmp``."""
     cf = MODELS[model]
     if cf is None:
         return scenario
     tmp.mkdir(parents=True, exist_ok=True)
-    new_routes: list[Path] = []
-    for i, rf in enumerate(scenario.route_files):
-        tree = ET.parse(rf)
-        for vt in tree.getroot().iter("vType"):
-            vt.set("carFollowModel", cf)  # every other attribute kept
-        dst = tmp / f"{i}_{rf.name}"
-        tree.write(dst, encoding="UTF-8", xml_declaration=True)
-        new_routes.append(dst.resolve())
-    tree = ET.parse(scenario.sumocfg)
-    root = tree.getroot()
-    base = scenario.sumocfg.parent
-    for el in root.iter():
-        if el.tag == "route-files":
-            el.set("value", ",".join(str(p) for p in new_routes))
-        elif el.tag in ("net-file", "additional-files") and el.get("value"):
-            el.set("value", ",".join(str((base / v.strip()).resolve()) for v in el.get("value", "").split(",") if v.strip()))
-    cfg = tmp / scenario.sumocfg.name
-    tree.write(cfg, encoding="UTF-8", xml_declaration=True)
-    return dataclasses.replace(scenario, sumocfg=cfg.resolve(), route_files=new_routes)
+
+    def rewritten(files: Sequence[Path], kind: str) -> list[Path]:
+        out = []
+        for i, f in enumerate(files):
+            root = read_xml(f)
+            types = list(root.iter("vType"))
+            if not types:
+                out.append(f)
+                continue
+            for vt in types:
+                vt.set("carFollowModel", cf)  # every other attribute kept
+            dst = tmp / f"{kind}{i}_{f.name.removesuffix('.gz')}"
+            ET.ElementTree(root).write(dst, encoding="UTF-8", xml_declaration=True)
+            out.append(dst.absolute())
+        return out
+
+    routes = rewritten(scenario.route_files, "routes")
+    additional = rewritten(scenario.additional_files, "additional")
+    cfg = scenario.config().write_copy(
+        tmp / "model.sumocfg", {"route-files": routes, "additional-files": additional}
+    )
+    return dataclasses.replace(scenario, sumocfg=cfg, route_files=routes, additional_files=additional)
 
 
 def selector(opts: CompareOptions, scenario: Scenario, seed: int) -> Callable[[str, str], bool]:
@@ -83,9 +81,9 @@ def selector(opts: CompareOptions, scenario: Scenario, seed: int) -> Callable[[s
         frac = opts.controlled_fraction
         return lambda vid, vtype: unit_hash(seed, vid) < frac
     if opts.controlled_type is not None:
-        want = opts.controlled_type
-        return lambda vid, vtype: vtype == want
-    marked = {t for t, params in vtype_params(scenario.route_files).items()
+        want = set(scenario.vtypes().members(opts.controlled_type) or [opts.controlled_type])
+        return lambda vid, vtype: vtype in want
+    marked = {t for t, params in vtype_params(scenario).items()
               if params.get(CONTROLLED_PARAM, "").strip().lower() in ("1", "true", "yes")}
     return lambda vid, vtype: vtype in marked
 
@@ -95,11 +93,13 @@ def _output_args(sd: Path) -> list[str]:
     return ["--tripinfo-output.write-unfinished", "true", "--statistic-output", str(sd / "statistics.xml")]
 
 
-def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path) -> None:
-    """Plain SUMO with the options the runner uses (SumoConnection.command with fcd and ssm)."""
+def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path, sumo_args: Sequence[str] = ()) -> None:
+    """Plain SUMO with the options the runner uses (SumoConnection.command
+    with fcd and ssm), the scenario's run configuration (its outputs under
+    ``out/sumo``) and the user's extra SUMO options, which replace ours."""
     sd = out / "sumo"
     sd.mkdir(parents=True, exist_ok=True)
-    cmd = [sumo_binary(False), "-c", str(scenario.sumocfg), "--seed", str(seed),
+    cmd = [sumo_binary(False), "-c", str(scenario.run_config(sd)), "--seed", str(seed),
            "--no-step-log", "true", "--duration-log.disable", "true",
            "--tripinfo-output", str(sd / "tripinfo.xml"), "--device.emissions.probability", "1",
            "--collision-output", str(sd / "collisions.xml"), "--log", str(sd / "sumo.log"),
@@ -109,6 +109,7 @@ def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path) 
            *_output_args(sd)]
     if end_s is not None:
         cmd += ["--end", str(end_s)]
+    cmd = cmd[:3] + override_options(cmd[3:], list(sumo_args))
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         lines = [ln.strip() for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
