@@ -73,7 +73,7 @@ INCOMPLETE = "INCOMPLETE"
 #: What a run writes (removed at the start, so no earlier run's file is left
 #: beside a new run's partial outputs).
 OUTPUTS = (
-    "summary.json", "vehicles.csv", "trace.csv", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
+    "summary.json", "vehicles.csv", "collisions.csv", "trace.csv", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
     "sumo/tripinfo.xml", "sumo/collisions.xml", "sumo/sumo.log", "sumo/fcd.xml", "sumo/ssm.xml",
 )
 
@@ -104,6 +104,7 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
         raise ScenarioError(
             f"{scenario.sumocfg}: SUMO stopped the run: {first} (see {out / 'sumo' / 'sumo.log'})"
         ) from None
+    _count_collisions(result, out)
     report.write_vehicles_csv(result.records, out / "vehicles.csv")
     if options.trace:
         run.write_trace(out / "trace.csv")
@@ -111,6 +112,23 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     report.write_json(result.summary, out / "summary.json")
     marker.unlink()
     return result
+
+
+def _count_collisions(result: RunResult, out: Path) -> None:
+    """Adds SUMO's own collision record to the summary (``collisions_all``,
+    ``collisions_with_controlled``: every collision of the run, counted the
+    same under any ``collision.action``) and writes ``collisions.csv``."""
+    import csv
+
+    from blendtrack.sumo.outputs import COLLISION_COLUMNS, read_collisions
+
+    rows = read_collisions(out / "sumo" / "collisions.xml", {r.vid for r in result.records})
+    result.summary["collisions_all"] = len(rows)
+    result.summary["collisions_with_controlled"] = sum(int(r["controlled_involved"]) for r in rows)
+    with open(out / "collisions.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=COLLISION_COLUMNS)
+        w.writeheader()
+        w.writerows(rows)
 
 
 def _run_in_child(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:

@@ -110,6 +110,34 @@ def read_tripinfo(file: Path) -> dict[str, dict[str, float]]:
     return out
 
 
+#: collisions.csv's columns: one row per collision SUMO recorded.
+COLLISION_COLUMNS = ("time_s", "type", "lane", "collider", "victim", "collider_type", "victim_type", "controlled_involved")
+
+
+def read_collisions(file: Path, controlled: set[str]) -> list[dict[str, object]]:
+    """Every collision in SUMO's collision output, whatever ``collision.action``
+    made of it (a warning, a teleport, a removal), with who was involved and
+    whether a vehicle of ``controlled`` was one of them; [] without the file."""
+    import sumolib
+
+    if not Path(file).is_file():
+        return []
+    rows: list[dict[str, object]] = []
+    for c in sumolib.xml.parse(str(file), "collision"):
+        collider, victim = c.getAttributeSecure("collider", ""), c.getAttributeSecure("victim", "")
+        rows.append({
+            "time_s": float(c.getAttributeSecure("time", "nan")),
+            "type": c.getAttributeSecure("type", ""),
+            "lane": c.getAttributeSecure("lane", ""),
+            "collider": collider,
+            "victim": victim,
+            "collider_type": c.getAttributeSecure("colliderType", ""),
+            "victim_type": c.getAttributeSecure("victimType", ""),
+            "controlled_involved": int(collider in controlled or victim in controlled),
+        })
+    return rows
+
+
 def read_ssm_conflicts(file: Path) -> float:
     """Conflicts with TTC < 3 s or DRAC > 3 m/s^2 (NaN without an ssm.xml)."""
     import sumolib

@@ -1,0 +1,55 @@
+"""Incidents counted from SUMO's own records (issue 18 item 6): every
+collision in SUMO's collision output, whoever was involved, whatever
+``collision.action`` made of it."""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from blendtrack.sumo.outputs import read_collisions
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "scenarios_real"
+
+COLLISIONS = """<?xml version="1.0" encoding="UTF-8"?>
+<collisions>
+    <collision time="10.00" type="collision" lane="a_0" pos="87.7" collider="car1" victim="car2" colliderType="t" victimType="t"/>
+    <collision time="56.00" type="junction" lane=":j_0_0" pos="21.5" collider="bus3" victim="car4" colliderType="bus" victimType="t"/>
+    <collision time="58.50" type="collision" lane="b_1" pos="6.0" collider="car5" victim="car6" colliderType="t" victimType="t"/>
+</collisions>
+"""
+
+
+def test_every_collision_is_read_with_who_and_whether_a_controlled_vehicle_was_in_it(tmp_path: Path) -> None:
+    f = tmp_path / "collisions.xml"
+    f.write_text(COLLISIONS)
+    rows = read_collisions(f, {"car2", "car5"})
+    assert [(r["time_s"], r["collider"], r["victim"], r["controlled_involved"]) for r in rows] == [
+        (10.0, "car1", "car2", 1), (56.0, "bus3", "car4", 0), (58.5, "car5", "car6", 1)]
+    assert rows[1]["type"] == "junction" and rows[1]["collider_type"] == "bus"
+    assert read_collisions(tmp_path / "none.xml", set()) == []
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason="../shared/scenarios_real is not beside the repo")
+def test_a_run_counts_what_sumo_recorded(tmp_path: Path) -> None:
+    # Eccles at its own 1 s step: SUMO's drivers collide there within a minute.
+    out = tmp_path / "o"
+    proc = subprocess.run([sys.executable, "-m", "blendtrack.cli", "sumo", "run", str(REAL / "eccles_interchange" / "interchangeSim.cfg"),
+                           "--controlled-fraction", "0.3", "--end", "60", "--quiet", "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    xml = (out / "sumo" / "collisions.xml").read_text()
+    events = re.findall(r'<collision [^>]*collider="([^"]+)" victim="([^"]+)"', xml)
+    assert events, "the check needs collisions to count (SUMO's drivers collided here in every run so far)"
+    assert summary["collisions_all"] == len(events)
+    with open(out / "vehicles.csv") as fh:
+        controlled = {r["id"] for r in csv.DictReader(fh)}
+    assert summary["collisions_with_controlled"] == sum(1 for a, b in events if a in controlled or b in controlled)
+    with open(out / "collisions.csv") as fh:
+        assert [(r["collider"], r["victim"]) for r in csv.DictReader(fh)] == events
