@@ -53,3 +53,22 @@ def test_a_run_counts_what_sumo_recorded(tmp_path: Path) -> None:
     assert summary["collisions_with_controlled"] == sum(1 for a, b in events if a in controlled or b in controlled)
     with open(out / "collisions.csv") as fh:
         assert [(r["collider"], r["victim"]) for r in csv.DictReader(fh)] == events
+
+
+def test_plot_samples_fold_into_fixed_bins_whatever_the_run_length() -> None:
+    import numpy as np
+
+    from blendtrack.sumo.records import SampleHistograms
+
+    h = SampleHistograms()
+    shapes = (h.error_counts.shape, h.speed_curvature_counts.shape)
+    # |e| = 0.005 m -> first bin, 0.015 -> second, 5 m -> the last (beyond 2 m);
+    # curvature 0.0105 and 10.2 m/s -> bin (10, 20); NaN rows are dropped.
+    h.add([[0.0105, 10.2, 0.005, 0.0], [0.0105, 10.2, -0.015, 0.0], [0.5, 99.0, 5.0, 0.0], [np.nan, 1.0, 0.1, 0.0]])
+    assert h.n == 3
+    assert h.error_counts[0] == 1 and h.error_counts[1] == 1 and h.error_counts[-1] == 1
+    assert h.speed_curvature_counts[10, 20] == 2 and h.speed_curvature_counts[-1, -1] == 1
+    for _ in range(200):
+        h.add(np.tile([0.01, 5.0, 0.1, 0.0], (1000, 1)))
+    assert h.n == 200_003 and int(h.error_counts.sum()) == h.n
+    assert (h.error_counts.shape, h.speed_curvature_counts.shape) == shapes

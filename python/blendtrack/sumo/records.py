@@ -47,14 +47,44 @@ class VehicleRecord:
     lane_changes: int = 0
 
 
+class SampleHistograms:
+    """Fixed-bin histograms of the controlled vehicles' samples, for the
+    plots: |lateral error| (0.01 m bins to 2 m, the last bin holding all
+    beyond) and speed against |curvature| (0.001 1/m by 0.5 m/s bins to
+    0.2 1/m and 40 m/s, clipped into the last bins). Their memory is fixed
+    whatever the run's length: the samples are folded in and dropped."""
+
+    ERROR_EDGES = np.linspace(0.0, 2.0, 201)
+    CURVATURE_EDGES = np.linspace(0.0, 0.2, 201)
+    SPEED_EDGES = np.linspace(0.0, 40.0, 81)
+
+    def __init__(self) -> None:
+        self.error_counts = np.zeros(len(self.ERROR_EDGES) - 1, dtype=np.int64)
+        self.speed_curvature_counts = np.zeros((len(self.CURVATURE_EDGES) - 1, len(self.SPEED_EDGES) - 1), dtype=np.int64)
+        self.n = 0
+
+    def add(self, samples: Any) -> None:
+        """Folds in ``(|curvature|, speed, |lateral error|, lateral acceleration)`` rows."""
+        a = np.asarray(samples, dtype=float).reshape(-1, 4)
+        a = a[np.isfinite(a[:, :3]).all(axis=1)]
+        if not len(a):
+            return
+        self.n += len(a)
+        e = np.clip(np.abs(a[:, 2]), 0.0, self.ERROR_EDGES[-1] - 1e-12)
+        self.error_counts += np.histogram(e, self.ERROR_EDGES)[0]
+        k = np.clip(np.abs(a[:, 0]), 0.0, self.CURVATURE_EDGES[-1] - 1e-12)
+        v = np.clip(np.abs(a[:, 1]), 0.0, self.SPEED_EDGES[-1] - 1e-12)
+        self.speed_curvature_counts += np.histogram2d(k, v, [self.CURVATURE_EDGES, self.SPEED_EDGES])[0].astype(np.int64)
+
+
 @dataclass
 class RunResult:
     records: list[VehicleRecord]
     summary: dict[str, Any]
     #: vid -> (trajectory rows (t, x, y, v, e, kappa), its reference points).
     trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
-    #: Samples of (|curvature|, speed, |lateral error|, lateral acceleration) of controlled vehicles.
-    samples: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    #: Histograms of the samples of (|curvature|, speed, |lateral error|) of controlled vehicles.
+    histograms: SampleHistograms = field(default_factory=SampleHistograms)
 
 
 class Trace:

@@ -118,22 +118,31 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
     import matplotlib.pyplot as plt
 
     files: list[Path] = []
-    samples = result.samples
+    h = result.histograms
     fig, ax = plt.subplots(figsize=(7, 4))
-    if len(samples):
-        ax.hist(samples[:, 2], bins=50, color="tab:blue")
-    ax.set_xlabel("|lateral error| of the control point (m)")
+    if h.n:
+        last = int(np.nonzero(h.error_counts)[0].max()) + 1 if h.error_counts.any() else 1
+        edges = h.ERROR_EDGES[: last + 1]
+        ax.stairs(h.error_counts[:last], edges, fill=True, color="tab:blue")
+    ax.set_xlabel("|lateral error| of the control point (m; the last 0.01 m bin holds all beyond 2 m)")
     ax.set_ylabel("samples (every 10th step)")
     ax.set_title("Lateral error of controlled vehicles")
     files.append(save_figure(fig, out / "lateral_error_hist.png", 110))
 
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    if len(samples):
-        ax.scatter(samples[:, 0], samples[:, 1], s=3, alpha=0.4, label="controlled vehicles")
-        kmax = max(float(samples[:, 0].max()), 1e-3)
+    if h.n:
+        counts = h.speed_curvature_counts
+        ki = int(np.nonzero(counts.any(axis=1))[0].max()) + 1
+        vi = int(np.nonzero(counts.any(axis=0))[0].max()) + 1
+        kmax, vmax = float(h.CURVATURE_EDGES[ki]), float(h.SPEED_EDGES[vi])
+        shown = np.ma.masked_equal(counts[:ki, :vi].T, 0)
+        mesh = ax.pcolormesh(h.CURVATURE_EDGES[: ki + 1], h.SPEED_EDGES[: vi + 1], shown, cmap="viridis",
+                             norm=matplotlib.colors.LogNorm())
+        fig.colorbar(mesh, ax=ax, label="samples (every 10th step)")
         k = np.linspace(kmax / 200, kmax, 200)
         ax.plot(k, np.sqrt(comfort / k), "k--", lw=1, label=f"v = sqrt({comfort:g} / |curvature|)")
-        ax.set_ylim(0, max(float(samples[:, 1].max()) * 1.1, 1.0))
+        ax.set_xlim(0, kmax)
+        ax.set_ylim(0, max(vmax * 1.1, 1.0))
         ax.legend(loc="upper right", fontsize=8)
     else:
         ax.text(0.5, 0.5, "no controlled vehicle", ha="center", va="center", transform=ax.transAxes)

@@ -64,7 +64,7 @@ from blendtrack.sumo.junctions import YIELD_LOOKAHEAD_M, Junctions
 from blendtrack.sumo.lanechange import LANE_CHANGE_ROOM_M, LaneChanges
 from blendtrack.sumo.network import Network
 from blendtrack.sumo.options import RunOptions
-from blendtrack.sumo.records import RunResult, Trace, VehicleRecord
+from blendtrack.sumo.records import RunResult, SampleHistograms, Trace, VehicleRecord
 from blendtrack.sumo.scenario import Scenario
 from blendtrack.sumo.selection import Selection, parse_ids
 from blendtrack.sumo.tracks import Active, Tracks
@@ -79,6 +79,9 @@ CHEAP_HEADING_RAD = math.radians(2.0)
 # A controlled vehicle's route id is compared with SUMO's every this many steps
 # (rerouting is rare; a move SUMO rejects triggers the check at once).
 ROUTE_CHECK_EVERY = 10
+#: Steps between foldings of the fleet's plot samples into fixed-bin
+#: histograms (their memory stays fixed over any run length).
+SAMPLE_FOLD_STEPS = 500
 
 # RouteFleet move codes.
 _SPEED, _LANE, _XY, _INVALID, _HOLD = 0, 1, 2, 3, 4
@@ -117,6 +120,7 @@ class SumoRun:
         #: The controlled vehicles by id, and the records of all taken over.
         self.active = self.vehicles.active
         self.records = self.vehicles.records
+        self.histograms = SampleHistograms()
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel)
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel)
         self.trace = Trace()
@@ -164,7 +168,8 @@ class SumoRun:
                 self._drop(vid, t_end, "end")
             self.conn.close()
         wall = time.perf_counter() - wall0
-        return RunResult(self.records, self._summary(t_end, steps, wall), self.vehicles.trajectories, self.fleet.take_samples())
+        self.histograms.add(self.fleet.take_samples())
+        return RunResult(self.records, self._summary(t_end, steps, wall), self.vehicles.trajectories, self.histograms)
 
     def _summary(self, t_end: float, steps: int, wall: float) -> dict[str, Any]:
         records, counts, lanes = self.records, self.counts, self.lanes.counts
@@ -227,6 +232,8 @@ class SumoRun:
             self._events(t)
             if self.active:
                 self._control_step(t)
+            if steps % SAMPLE_FOLD_STEPS == 0:
+                self.histograms.add(self.fleet.take_samples())
             if bar is not None and t - last_t >= 1.0:
                 bar.update(int(t) - int(last_t))
                 last_t = float(int(t))
