@@ -258,126 +258,152 @@ impl From<&Core> for ControllerConfig {
     }
 }
 
-impl ControllerConfig {
-    /// The validated core configuration.
-    pub(crate) fn to_core(&self) -> PyResult<Core> {
-        self.fields.to_core(CONTROLLER, Core::validate)
-    }
+/// The methods `ControllerConfig` and `VehicleParams` share: the same code
+/// for both but for the core type, the class name, the validation and the
+/// TOML table, so it is written once. The docs of `new` and `from_toml` and
+/// the class's own methods come with each use.
+macro_rules! config_class {
+    (
+        $class:ident, $core:ty, $name:expr, $validate:expr, $table:literal,
+        new: { $(#[$new_doc:meta])* },
+        from_toml: { $(#[$from_toml_doc:meta])* },
+        { $($extra:tt)* }
+    ) => {
+        impl $class {
+            /// The validated core configuration.
+            pub(crate) fn to_core(&self) -> PyResult<$core> {
+                self.fields.to_core($name, $validate)
+            }
 
-    fn with_kwargs(base: &Core, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let mut t = Fields::of(base)?.0;
-        t.extend(dict_to_toml(kwargs)?);
-        let c: Core = Fields(t).to_core(CONTROLLER, Core::validate)?;
-        Ok(Self::from(&c))
-    }
+            fn with_kwargs(base: &$core, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+                let mut t = Fields::of(base)?.0;
+                t.extend(dict_to_toml(kwargs)?);
+                let c: $core = Fields(t).to_core($name, $validate)?;
+                Ok(Self::from(&c))
+            }
+
+            /// The keys as TOML, without a table header.
+            fn toml_text(&self) -> PyResult<String> {
+                toml::to_string(&self.to_core()?).map_err(|e| PyConfigError::new_err(e.to_string()))
+            }
+        }
+
+        #[pymethods]
+        impl $class {
+            $(#[$new_doc])*
+            #[new]
+            #[pyo3(signature = (**kwargs))]
+            fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+                Self::with_kwargs(&<$core>::default(), kwargs)
+            }
+
+            fn __getattr__<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+                self.fields.get(py, $name, name)
+            }
+
+            fn __setattr__(&mut self, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
+                self.fields.set($name, name, value)
+            }
+
+            fn __delattr__(&mut self, name: &str) -> PyResult<()> {
+                Err(PyAttributeError::new_err(format!(
+                    "cannot delete attribute '{name}' of '{}'",
+                    $name
+                )))
+            }
+
+            fn __dir__(slf: &Bound<'_, Self>) -> PyResult<Vec<String>> {
+                Fields::dir(slf.as_any(), &slf.borrow().fields)
+            }
+
+            /// A validated copy with some keys changed.
+            #[pyo3(signature = (**kwargs))]
+            fn replace(&self, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+                Self::with_kwargs(&self.to_core()?, kwargs)
+            }
+
+            /// Raises ConfigError naming the first invalid key.
+            fn validate(&self) -> PyResult<()> {
+                self.to_core().map(|_| ())
+            }
+
+            $(#[$from_toml_doc])*
+            #[staticmethod]
+            #[pyo3(signature = (text, source = "<string>"))]
+            fn from_toml(text: &str, source: &str) -> PyResult<Self> {
+                let t = parse_section(text, source, $table)?;
+                let c: $core = Fields(t).to_core(source, $validate)?;
+                Ok(Self::from(&c))
+            }
+
+            /// Reads a TOML file (see `from_toml`).
+            #[staticmethod]
+            fn load(file: std::path::PathBuf) -> PyResult<Self> {
+                let name = file.display().to_string();
+                Self::from_toml(&read_file(&name)?, &name)
+            }
+
+            fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+                to_dict(py, &self.to_core()?)
+            }
+
+            /// Pickling (worker processes of `blendtrack batch`, `run_scenario`'s
+            /// child process): rebuilt from its TOML, validated again.
+            fn __reduce__<'py>(
+                slf: &Bound<'py, Self>,
+            ) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
+                let text = slf.borrow().toml_text()?;
+                Ok((slf.get_type().getattr("from_toml")?, (text, "<pickle>")))
+            }
+
+            $($extra)*
+        }
+    };
 }
 
-#[pymethods]
-impl ControllerConfig {
-    /// Defaults of the paper's tests #1-#3, overridden by keyword arguments
-    /// (validated; unknown or out-of-range keys raise ConfigError).
-    #[new]
-    #[pyo3(signature = (**kwargs))]
-    fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        Self::with_kwargs(&Core::default(), kwargs)
-    }
+config_class!(
+    ControllerConfig, Core, CONTROLLER, Core::validate, "controller",
+    new: {
+        /// Defaults of the paper's tests #1-#3, overridden by keyword arguments
+        /// (validated; unknown or out-of-range keys raise ConfigError).
+    },
+    from_toml: {
+        /// Parses TOML: the `[controller]` table if there is one (a whole config
+        /// file), else the top-level keys.
+    },
+    {
+        /// The keys a config file sets in its `[controller]` table (to tell a
+        /// user's explicit values from the defaults); empty without the table.
+        #[staticmethod]
+        fn keys_in_file<'py>(py: Python<'py>, file: std::path::PathBuf) -> PyResult<Bound<'py, PySet>> {
+            PySet::new(py, keys_in_file(&file.display().to_string(), "controller")?)
+        }
 
-    fn __getattr__<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
-        self.fields.get(py, CONTROLLER, name)
-    }
+        /// The keys as TOML (a `[controller]` table when `table` is true).
+        #[pyo3(signature = (table = false))]
+        fn to_toml(&self, table: bool) -> PyResult<String> {
+            let s = self.toml_text()?;
+            Ok(if table { format!("[controller]\n{s}") } else { s })
+        }
 
-    fn __setattr__(&mut self, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.fields.set(CONTROLLER, name, value)
-    }
+        fn __repr__(&self) -> String {
+            let keys = [
+                "lat_blend_factor",
+                "direction",
+                "lateral_controller",
+                "preferred_speed",
+            ];
+            self.fields.repr::<Core>(CONTROLLER, Some(&keys))
+        }
 
-    fn __delattr__(&mut self, name: &str) -> PyResult<()> {
-        Err(PyAttributeError::new_err(format!(
-            "cannot delete attribute '{name}' of '{CONTROLLER}'"
-        )))
-    }
-
-    fn __dir__(slf: &Bound<'_, Self>) -> PyResult<Vec<String>> {
-        Fields::dir(slf.as_any(), &slf.borrow().fields)
-    }
-
-    /// A validated copy with some keys changed.
-    #[pyo3(signature = (**kwargs))]
-    fn replace(&self, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        Self::with_kwargs(&self.to_core()?, kwargs)
-    }
-
-    /// Raises ConfigError naming the first invalid key.
-    fn validate(&self) -> PyResult<()> {
-        self.to_core().map(|_| ())
-    }
-
-    /// Parses TOML: the `[controller]` table if there is one (a whole config
-    /// file), else the top-level keys.
-    #[staticmethod]
-    #[pyo3(signature = (text, source = "<string>"))]
-    fn from_toml(text: &str, source: &str) -> PyResult<Self> {
-        let t = parse_section(text, source, "controller")?;
-        let c: Core = Fields(t).to_core(source, Core::validate)?;
-        Ok(Self::from(&c))
-    }
-
-    /// Reads a TOML file (see `from_toml`).
-    #[staticmethod]
-    fn load(file: std::path::PathBuf) -> PyResult<Self> {
-        let name = file.display().to_string();
-        Self::from_toml(&read_file(&name)?, &name)
-    }
-
-    /// The keys a config file sets in its `[controller]` table (to tell a
-    /// user's explicit values from the defaults); empty without the table.
-    #[staticmethod]
-    fn keys_in_file<'py>(py: Python<'py>, file: std::path::PathBuf) -> PyResult<Bound<'py, PySet>> {
-        PySet::new(py, keys_in_file(&file.display().to_string(), "controller")?)
-    }
-
-    /// The keys as TOML (a `[controller]` table when `table` is true).
-    #[pyo3(signature = (table = false))]
-    fn to_toml(&self, table: bool) -> PyResult<String> {
-        let c = self.to_core()?;
-        if table {
-            toml::to_string(&c)
-                .map(|s| format!("[controller]\n{s}"))
-                .map_err(|e| PyConfigError::new_err(e.to_string()))
-        } else {
-            toml::to_string(&c).map_err(|e| PyConfigError::new_err(e.to_string()))
+        fn __copy__(&self) -> Self {
+            self.clone()
+        }
+        fn __deepcopy__(&self, _memo: &Bound<'_, PyAny>) -> Self {
+            self.clone()
         }
     }
-
-    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        to_dict(py, &self.to_core()?)
-    }
-
-    fn __repr__(&self) -> String {
-        let keys = [
-            "lat_blend_factor",
-            "direction",
-            "lateral_controller",
-            "preferred_speed",
-        ];
-        self.fields.repr::<Core>(CONTROLLER, Some(&keys))
-    }
-
-    fn __copy__(&self) -> Self {
-        self.clone()
-    }
-    fn __deepcopy__(&self, _memo: &Bound<'_, PyAny>) -> Self {
-        self.clone()
-    }
-
-    /// Pickling (worker processes of `blendtrack batch`, `run_scenario`'s
-    /// child process): rebuilt from its TOML, validated again.
-    fn __reduce__<'py>(
-        slf: &Bound<'py, Self>,
-    ) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
-        let text = slf.borrow().to_toml(false)?;
-        Ok((slf.get_type().getattr("from_toml")?, (text, "<pickle>")))
-    }
-}
+);
 
 /// Physical limits of the vehicle (wheelbase, steering, acceleration,
 /// speed): the core's `VehicleParams`, attribute by attribute.
@@ -398,91 +424,24 @@ impl From<&CoreVehicle> for VehicleParams {
     }
 }
 
-impl VehicleParams {
-    pub(crate) fn to_core(&self) -> PyResult<CoreVehicle> {
-        self.fields
-            .to_core(VEHICLE, blendtrack::config::validate_vehicle)
-    }
+config_class!(
+    VehicleParams, CoreVehicle, VEHICLE, blendtrack::config::validate_vehicle, "vehicle",
+    new: {
+        /// Defaults (wheelbase 2.6 m, 40 deg, 30 deg/s, ...) overridden by keywords.
+    },
+    from_toml: {
+        /// Parses TOML: the `[vehicle]` table if there is one, else the top-level keys.
+    },
+    {
+        fn to_toml(&self) -> PyResult<String> {
+            self.toml_text()
+        }
 
-    fn with_kwargs(base: &CoreVehicle, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        let mut t = Fields::of(base)?.0;
-        t.extend(dict_to_toml(kwargs)?);
-        let v: CoreVehicle = Fields(t).to_core(VEHICLE, blendtrack::config::validate_vehicle)?;
-        Ok(Self::from(&v))
+        fn __repr__(&self) -> String {
+            self.fields.repr::<CoreVehicle>(VEHICLE, None)
+        }
     }
-}
-
-#[pymethods]
-impl VehicleParams {
-    /// Defaults (wheelbase 2.6 m, 40 deg, 30 deg/s, ...) overridden by keywords.
-    #[new]
-    #[pyo3(signature = (**kwargs))]
-    fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        Self::with_kwargs(&CoreVehicle::default(), kwargs)
-    }
-
-    fn __getattr__<'py>(&self, py: Python<'py>, name: &str) -> PyResult<Bound<'py, PyAny>> {
-        self.fields.get(py, VEHICLE, name)
-    }
-
-    fn __setattr__(&mut self, name: &str, value: &Bound<'_, PyAny>) -> PyResult<()> {
-        self.fields.set(VEHICLE, name, value)
-    }
-
-    fn __delattr__(&mut self, name: &str) -> PyResult<()> {
-        Err(PyAttributeError::new_err(format!(
-            "cannot delete attribute '{name}' of '{VEHICLE}'"
-        )))
-    }
-
-    fn __dir__(slf: &Bound<'_, Self>) -> PyResult<Vec<String>> {
-        Fields::dir(slf.as_any(), &slf.borrow().fields)
-    }
-
-    #[pyo3(signature = (**kwargs))]
-    fn replace(&self, kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
-        Self::with_kwargs(&self.to_core()?, kwargs)
-    }
-
-    fn validate(&self) -> PyResult<()> {
-        self.to_core().map(|_| ())
-    }
-
-    /// Parses TOML: the `[vehicle]` table if there is one, else the top-level keys.
-    #[staticmethod]
-    #[pyo3(signature = (text, source = "<string>"))]
-    fn from_toml(text: &str, source: &str) -> PyResult<Self> {
-        let t = parse_section(text, source, "vehicle")?;
-        let v: CoreVehicle = Fields(t).to_core(source, blendtrack::config::validate_vehicle)?;
-        Ok(Self::from(&v))
-    }
-
-    #[staticmethod]
-    fn load(file: std::path::PathBuf) -> PyResult<Self> {
-        let name = file.display().to_string();
-        Self::from_toml(&read_file(&name)?, &name)
-    }
-
-    fn to_toml(&self) -> PyResult<String> {
-        toml::to_string(&self.to_core()?).map_err(|e| PyConfigError::new_err(e.to_string()))
-    }
-
-    /// Pickling: rebuilt from its TOML, validated again.
-    fn __reduce__<'py>(
-        slf: &Bound<'py, Self>,
-    ) -> PyResult<(Bound<'py, PyAny>, (String, &'static str))> {
-        let text = slf.borrow().to_toml()?;
-        Ok((slf.get_type().getattr("from_toml")?, (text, "<pickle>")))
-    }
-
-    fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        to_dict(py, &self.to_core()?)
-    }
-
-    fn __repr__(&self) -> String {
-        self.fields.repr::<CoreVehicle>(VEHICLE, None)
-    }
-}
+);
 
 /// Loads a whole config file (`[controller]` and `[vehicle]` tables).
 #[pyfunction]

@@ -69,7 +69,7 @@ pub struct ControlOutput {
 pub struct Controller {
     track: Arc<Track>,
     cfg: ControllerConfig,
-    gains: LateralGains,
+    wheelbase_m: f64,
     auto: AutoAlphaParams,
     max_steering_rad: f64,
     hint_rear: Option<f64>,
@@ -93,17 +93,6 @@ impl Controller {
     ) -> Result<Self, ConfigError> {
         cfg.validate()?;
         validate_vehicle(vehicle)?;
-        let gains = LateralGains {
-            wheelbase_m: vehicle.wheelbase_m,
-            stanley_gain: cfg.stanley_gain,
-            stanley_gain_reverse: cfg.stanley_gain_reverse,
-            stanley_softening_mps: cfg.stanley_softening_mps,
-            target_distance_min_m: cfg.target_distance_min_m,
-            target_distance_gain_s: cfg.target_distance_gain_s,
-            curvature_lookahead_gain_s: cfg.curvature_lookahead_gain_s,
-            pure_pursuit_gain_s: cfg.pure_pursuit_gain_s,
-            pure_pursuit_min_lookahead_m: cfg.pure_pursuit_min_lookahead_m,
-        };
         let auto = AutoAlphaParams {
             base_forward: cfg.auto_alpha_forward,
             base_backward: cfg.auto_alpha_backward,
@@ -115,7 +104,7 @@ impl Controller {
         Ok(Controller {
             track,
             cfg,
-            gains,
+            wheelbase_m: vehicle.wheelbase_m,
             auto,
             max_steering_rad: vehicle.max_steering_rad(),
             hint_rear: None,
@@ -128,6 +117,9 @@ impl Controller {
 
     pub fn config(&self) -> &ControllerConfig {
         &self.cfg
+    }
+    fn gains(&self) -> LateralGains<'_> {
+        LateralGains::new(&self.cfg, self.wheelbase_m)
     }
     pub fn track(&self) -> &Arc<Track> {
         &self.track
@@ -177,7 +169,7 @@ impl Controller {
     /// preview window ahead of the rear axle's foot (4 points over
     /// `max(E, auto_alpha_preview_s |v|)`) and the axle errors, through [`auto_alpha`].
     fn auto_alpha(&self, s_rear: f64, e_front: f64, e_rear: f64, speed: f64) -> f64 {
-        let g = &self.gains;
+        let g = self.gains();
         let path = &self.track.path;
         let l = g.curvature_lookahead(speed);
         let preview = g.wheelbase_m.max(self.cfg.auto_alpha_preview_s * speed);
@@ -232,7 +224,7 @@ impl Controller {
         // stepping vehicles of one track fight over its cache line.
         let track: &Track = &self.track;
         let path = &track.path;
-        let e = self.gains.wheelbase_m;
+        let e = self.wheelbase_m;
         let dir = self.cfg.direction;
         let speed = measured.v_mps.abs();
         let rear_pt = measured.rear();
@@ -263,12 +255,12 @@ impl Controller {
         };
         let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
             LateralKind::Blend => {
-                let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
-                let dr = rear_command(path, &rear, measured.theta_rad, speed, dir, &self.gains);
+                let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains());
+                let dr = rear_command(path, &rear, measured.theta_rad, speed, dir, &self.gains());
                 (alpha, df, dr)
             }
             LateralKind::Stanley => {
-                let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains);
+                let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains());
                 (1.0, df, f64::NAN)
             }
             LateralKind::PurePursuit => {
@@ -279,7 +271,7 @@ impl Controller {
                     measured.theta_rad,
                     speed,
                     dir,
-                    &self.gains,
+                    &self.gains(),
                 );
                 (0.0, f64::NAN, dr)
             }

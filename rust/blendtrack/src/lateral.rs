@@ -53,6 +53,7 @@
 //!   therefore adds the feed-forward `-2 asin(E kappa_front)`, which makes that
 //!   equilibrium exact without changing the linearised stability.
 
+use crate::config::ControllerConfig;
 use crate::path::{wrap_angle, Path, Projection};
 use crate::vehicle::Direction;
 use serde::{Deserialize, Serialize};
@@ -114,29 +115,31 @@ pub fn rear_second_term(wheelbase_m: f64, dtheta_rad: f64, lookahead_m: f64) -> 
     (2.0 * wheelbase_m / lookahead_m * (0.5 * kappa).clamp(-1.0, 1.0).asin()).atan()
 }
 
-/// Tuning of the lateral laws (from [`crate::config::ControllerConfig`]).
+/// Tuning of the lateral laws: the controller's config (its `stanley_*`,
+/// `target_distance_*`, `curvature_lookahead_gain_s` and `pure_pursuit_*`
+/// keys, read where the laws use them, so they are listed once) and the
+/// vehicle's wheelbase.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LateralGains {
+pub struct LateralGains<'a> {
     pub wheelbase_m: f64,
-    pub stanley_gain: f64,
-    pub stanley_gain_reverse: f64,
-    pub stanley_softening_mps: f64,
-    pub target_distance_min_m: f64,
-    pub target_distance_gain_s: f64,
-    pub curvature_lookahead_gain_s: f64,
-    pub pure_pursuit_gain_s: f64,
-    pub pure_pursuit_min_lookahead_m: f64,
+    pub cfg: &'a ControllerConfig,
 }
 
-impl LateralGains {
+impl<'a> LateralGains<'a> {
+    /// The gains of `cfg` for a vehicle of wheelbase `wheelbase_m`.
+    pub fn new(cfg: &'a ControllerConfig, wheelbase_m: f64) -> Self {
+        LateralGains { wheelbase_m, cfg }
+    }
+
     /// Target distance `d` of the rear law.
     pub fn target_distance(&self, speed_abs: f64) -> f64 {
-        self.target_distance_min_m
-            .max(self.target_distance_gain_s * speed_abs)
+        self.cfg
+            .target_distance_min_m
+            .max(self.cfg.target_distance_gain_s * speed_abs)
     }
     /// Curvature look-ahead `L` of the rear law.
     pub fn curvature_lookahead(&self, speed_abs: f64) -> f64 {
-        (2.0 * self.wheelbase_m).max(self.curvature_lookahead_gain_s * speed_abs)
+        (2.0 * self.wheelbase_m).max(self.cfg.curvature_lookahead_gain_s * speed_abs)
     }
 }
 
@@ -160,15 +163,15 @@ pub fn stanley_command(
     let th = travel_heading(theta_rad, direction);
     let e_theta = wrap_angle(th - front.heading_rad);
     let k = match direction {
-        Direction::Forward => g.stanley_gain,
-        Direction::Backward => g.stanley_gain_reverse,
+        Direction::Forward => g.cfg.stanley_gain,
+        Direction::Backward => g.cfg.stanley_gain_reverse,
     };
     let law = stanley(
         front.lateral_m,
         e_theta,
         speed_abs,
         k,
-        g.stanley_softening_mps,
+        g.cfg.stanley_softening_mps,
     );
     match direction {
         Direction::Forward => law,
@@ -213,7 +216,7 @@ pub fn pure_pursuit_command(
     g: &LateralGains,
 ) -> f64 {
     let th = travel_heading(theta_rad, direction);
-    let ld = g.pure_pursuit_gain_s * speed_abs + g.pure_pursuit_min_lookahead_m;
+    let ld = g.cfg.pure_pursuit_gain_s * speed_abs + g.cfg.pure_pursuit_min_lookahead_m;
     let t = path.point_at(rear.s + ld);
     let (dx, dy) = (t.x - rear_xy.0, t.y - rear_xy.1);
     let (s, c) = th.sin_cos();
@@ -417,17 +420,11 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
-    fn gains() -> LateralGains {
-        LateralGains {
-            wheelbase_m: 2.6,
+    /// The default config but a stiffer forward Stanley gain (with E = 2.6 m).
+    fn stiff_config() -> ControllerConfig {
+        ControllerConfig {
             stanley_gain: 2.5,
-            stanley_gain_reverse: 0.3,
-            stanley_softening_mps: 1.0,
-            target_distance_min_m: 2.0,
-            target_distance_gain_s: 2.0,
-            curvature_lookahead_gain_s: 2.0,
-            pure_pursuit_gain_s: 1.0,
-            pure_pursuit_min_lookahead_m: 3.0,
+            ..Default::default()
         }
     }
 
@@ -470,7 +467,8 @@ mod tests {
 
     #[test]
     fn rear_law_on_circle_with_zero_errors_gives_ackermann() {
-        let g = gains();
+        let cfg = stiff_config();
+        let g = LateralGains::new(&cfg, 2.6);
         for r in [10.0, 50.0, 200.0] {
             let path = Path::circle(r, 1e-4).unwrap();
             for &v in &[1.0, 3.0, 10.0] {

@@ -4,12 +4,22 @@
 use blendtrack::*;
 use std::sync::Arc;
 
+/// `simulate` with the default vehicle, the one every test here drives.
+fn sim(
+    track: &Arc<Track>,
+    cfg: &ControllerConfig,
+    sched: &AlphaSchedule,
+    opts: &SimOptions,
+) -> Result<Trace, Error> {
+    simulate(track.clone(), cfg, &VehicleParams::default(), sched, opts)
+}
+
 fn run(path: Path, cfg: ControllerConfig, opts: SimOptions) -> Trace {
     let track = Arc::new(Track::new(path, &cfg));
     let sched = AlphaSchedule::Constant {
         alpha: cfg.lat_blend_factor,
     };
-    simulate(track, &cfg, &VehicleParams::default(), &sched, &opts).unwrap()
+    sim(&track, &cfg, &sched, &opts).unwrap()
 }
 
 fn tail_mean_abs(v: &[f64], n: usize) -> f64 {
@@ -169,7 +179,7 @@ fn moving_control_point_stays_on_the_path() {
         duration_s: 200.0,
         ..Default::default()
     };
-    let tr = simulate(track, &cfg, &VehicleParams::default(), &sched, &opts).unwrap();
+    let tr = sim(&track, &cfg, &sched, &opts).unwrap();
     let amin = tr.alpha.iter().cloned().fold(1.0, f64::min);
     let amax = tr.alpha.iter().cloned().fold(0.0, f64::max);
     assert!(
@@ -200,7 +210,7 @@ fn curvature_slows_the_vehicle_down() {
         initial_speed_mps: 0.0,
         ..Default::default()
     };
-    let tr = simulate(track, &cfg, &VehicleParams::default(), &sched, &opts).unwrap();
+    let tr = sim(&track, &cfg, &sched, &opts).unwrap();
     let mut v_curve = Vec::new();
     let mut v_straight = Vec::new();
     for i in 3000..tr.len() {
@@ -240,31 +250,10 @@ fn noise_and_delay_runs_are_reproducible_and_stay_close() {
         seed: 42,
         ..Default::default()
     };
-    let a = simulate(
-        track.clone(),
-        &cfg,
-        &VehicleParams::default(),
-        &sched,
-        &opts,
-    )
-    .unwrap();
-    let b = simulate(
-        track.clone(),
-        &cfg,
-        &VehicleParams::default(),
-        &sched,
-        &opts,
-    )
-    .unwrap();
+    let a = sim(&track, &cfg, &sched, &opts).unwrap();
+    let b = sim(&track, &cfg, &sched, &opts).unwrap();
     assert_eq!(a, b, "same seed, same run");
-    let c = simulate(
-        track,
-        &cfg,
-        &VehicleParams::default(),
-        &sched,
-        &SimOptions { seed: 43, ..opts },
-    )
-    .unwrap();
+    let c = sim(&track, &cfg, &sched, &SimOptions { seed: 43, ..opts }).unwrap();
     assert_ne!(a.x_m, c.x_m);
     assert!(tail_mean_abs(&a.lateral_error_m, 5000) < 0.15);
 }
@@ -335,23 +324,15 @@ fn bad_sim_options_are_errors() {
             ..Default::default()
         },
     ] {
-        let e = simulate(
-            track.clone(),
-            &cfg,
-            &VehicleParams::default(),
-            &sched,
-            &opts,
-        )
-        .unwrap_err();
+        let e = sim(&track, &cfg, &sched, &opts).unwrap_err();
         assert!(
             matches!(e, Error::State(StateError::Parameter { .. })),
             "{e}"
         );
     }
-    let e = simulate(
-        track.clone(),
+    let e = sim(
+        &track,
         &cfg,
-        &VehicleParams::default(),
         &AlphaSchedule::Constant { alpha: 2.0 },
         &SimOptions::default(),
     )
@@ -361,13 +342,6 @@ fn bad_sim_options_are_errors() {
         lat_blend_factor: -0.1,
         ..Default::default()
     };
-    let e = simulate(
-        track,
-        &bad,
-        &VehicleParams::default(),
-        &sched,
-        &SimOptions::default(),
-    )
-    .unwrap_err();
+    let e = sim(&track, &bad, &sched, &SimOptions::default()).unwrap_err();
     assert!(e.to_string().contains("lat_blend_factor"), "{e}");
 }

@@ -7,6 +7,8 @@
 //! positive length, a config that validates, a finite bounded command). CI
 //! runs 256 cases each; `PROPTEST_CASES=1000000` runs a long campaign.
 
+mod common;
+
 use blendtrack::*;
 use proptest::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -178,13 +180,7 @@ fn state() -> impl Strategy<Value = VehicleState> {
         prop_oneof![-60.0f64..60.0, any::<f64>()],
         prop_oneof![-1.5f64..1.5, any::<f64>()],
     )
-        .prop_map(|(x, y, th, v, d)| VehicleState {
-            x_m: x,
-            y_m: y,
-            theta_rad: th,
-            v_mps: v,
-            delta_rad: d,
-        })
+        .prop_map(common::state_of)
 }
 
 proptest! {

@@ -164,17 +164,12 @@ fn the_stopping_law_from_standstill_matches_a_hand_solved_case() {
     assert!(a.abs() < 1e-12, "{a}");
 }
 
-fn reverse_gains(k_reverse: f64) -> LateralGains {
-    LateralGains {
-        wheelbase_m: 2.6,
+/// The default config with Stanley gains 2.5 forward and `k_reverse` backwards.
+fn reverse_config(k_reverse: f64) -> ControllerConfig {
+    ControllerConfig {
         stanley_gain: 2.5,
         stanley_gain_reverse: k_reverse,
-        stanley_softening_mps: 1.0,
-        target_distance_min_m: 2.0,
-        target_distance_gain_s: 2.0,
-        curvature_lookahead_gain_s: 2.0,
-        pure_pursuit_gain_s: 1.0,
-        pure_pursuit_min_lookahead_m: 3.0,
+        ..Default::default()
     }
 }
 
@@ -223,7 +218,7 @@ fn reverse_stanley_is_stable_with_its_reverse_gain_and_not_with_the_forward_gain
         (j[0][0] + j[1][1], j[0][0] * j[1][1] - j[0][1] * j[1][0])
     };
     for &v in &[0.2, 1.0, 3.0, 10.0] {
-        let (tr, det) = jacobian(v, &reverse_gains(0.3));
+        let (tr, det) = jacobian(v, &LateralGains::new(&reverse_config(0.3), 2.6));
         assert!(
             tr < 0.0 && det > 0.0,
             "v={v}: reverse gain 0.3 unstable ({tr}, {det})"
@@ -240,7 +235,7 @@ fn reverse_stanley_is_stable_with_its_reverse_gain_and_not_with_the_forward_gain
         );
     }
     // The forward gain reversing: unstable at low speed (b > 1/E).
-    let (tr, _) = jacobian(1.0, &reverse_gains(2.5));
+    let (tr, _) = jacobian(1.0, &LateralGains::new(&reverse_config(2.5), 2.6));
     assert!(
         tr > 0.0,
         "reversing with k = 2.5 at 1 m/s should be unstable, trace {tr}"

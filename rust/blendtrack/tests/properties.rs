@@ -2,6 +2,8 @@
 //! returns a finite, bounded command and never panics; invalid paths,
 //! configurations and states are errors, not panics.
 
+mod common;
+
 use blendtrack::*;
 use proptest::prelude::*;
 use std::sync::Arc;
@@ -31,13 +33,7 @@ fn any_state() -> impl Strategy<Value = VehicleState> {
         -40.0f64..40.0,
         -1.0f64..1.0,
     )
-        .prop_map(|(x, y, th, v, d)| VehicleState {
-            x_m: x,
-            y_m: y,
-            theta_rad: th,
-            v_mps: v,
-            delta_rad: d,
-        })
+        .prop_map(common::state_of)
 }
 
 fn any_config() -> impl Strategy<Value = ControllerConfig> {
