@@ -127,3 +127,18 @@ def test_configs_pickle_with_their_values() -> None:
     assert back != blendtrack.ControllerConfig()
     v = blendtrack.VehicleParams(wheelbase_m=2.9)
     assert pickle.loads(pickle.dumps(v)) == v != blendtrack.VehicleParams()
+
+
+def test_the_stub_lists_exactly_the_config_keys_the_core_has() -> None:
+    """The .pyi types each config key for users; the keys themselves are
+    defined once, in the core, and the stub must follow them."""
+    import ast
+    from pathlib import Path
+
+    import blendtrack
+
+    stub = ast.parse((Path(blendtrack.__file__).parent / "_blendtrack.pyi").read_text())
+    for cls, instance in (("ControllerConfig", blendtrack.ControllerConfig()), ("VehicleParams", blendtrack.VehicleParams())):
+        node = next(n for n in stub.body if isinstance(n, ast.ClassDef) and n.name == cls)
+        typed = {n.target.id for n in node.body if isinstance(n, ast.AnnAssign) and isinstance(n.target, ast.Name)}
+        assert typed == set(instance.to_dict()), f"{cls}: stub {sorted(typed ^ set(instance.to_dict()))}"

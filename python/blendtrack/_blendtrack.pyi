@@ -111,6 +111,7 @@ class ControllerConfig:
     use_path_widths: bool
     border_margin_m: float
     ray_horizon_m: float
+    emergency_deceleration: float
     alpha_mode: str
     auto_alpha_forward: float
     auto_alpha_backward: float
