@@ -202,23 +202,7 @@ impl Controller {
         alpha: f64,
         obstacles: &[Obstacle],
     ) -> Result<ControlOutput, StateError> {
-        measured.check_finite()?;
-        for (name, value) in [("x_m", measured.x_m), ("y_m", measured.y_m)] {
-            if value.abs() > crate::limits::MAX_COORDINATE_M {
-                return Err(StateError::Parameter {
-                    name,
-                    value,
-                    message: "position beyond 1e9 m: too far out for f64 to resolve the path",
-                });
-            }
-        }
-        if !(0.0..=1.0).contains(&alpha) {
-            return Err(StateError::Parameter {
-                name: "alpha",
-                value: alpha,
-                message: "must be in [0, 1]",
-            });
-        }
+        check_step_inputs(measured, alpha)?;
         // Borrowed, not cloned: an Arc clone per step is an atomic write to
         // a counter every vehicle on the track shares, which makes threads
         // stepping vehicles of one track fight over its cache line.
@@ -253,34 +237,15 @@ impl Controller {
             AlphaMode::Fixed => alpha,
             AlphaMode::Auto => self.auto_alpha(rear.s, front.lateral_m, rear.lateral_m, speed),
         };
-        let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
-            LateralKind::Blend => {
-                let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains());
-                let dr = rear_command(path, &rear, measured.theta_rad, speed, dir, &self.gains());
-                (alpha, df, dr)
-            }
-            LateralKind::Stanley => {
-                let df = stanley_command(&front, measured.theta_rad, speed, dir, &self.gains());
-                (1.0, df, f64::NAN)
-            }
-            LateralKind::PurePursuit => {
-                let dr = pure_pursuit_command(
-                    path,
-                    (rear_pt.x, rear_pt.y),
-                    &rear,
-                    measured.theta_rad,
-                    speed,
-                    dir,
-                    &self.gains(),
-                );
-                (0.0, f64::NAN, dr)
-            }
-        };
-        let raw = match self.cfg.lateral_controller {
-            LateralKind::Blend => blend(alpha, d_front, d_rear),
-            LateralKind::Stanley => d_front,
-            LateralKind::PurePursuit => d_rear,
-        };
+        let (alpha, d_front, d_rear, raw) = self.lateral_commands(
+            path,
+            &front,
+            &rear,
+            rear_pt,
+            measured.theta_rad,
+            speed,
+            alpha,
+        );
         let steering = raw.clamp(-self.max_steering_rad, self.max_steering_rad);
 
         let cp_pt = rear_pt + h * (alpha * e);
@@ -335,4 +300,71 @@ impl Controller {
             virtual_obstacle_m: d_obs.unwrap_or(f64::INFINITY),
         })
     }
+
+    /// The blend's two commands (NaN for a law a baseline does not use),
+    /// the alpha it used and the unclamped steering.
+    #[allow(clippy::too_many_arguments)]
+    fn lateral_commands(
+        &self,
+        path: &Path,
+        front: &crate::path::Projection,
+        rear: &crate::path::Projection,
+        rear_pt: Point2<f64>,
+        theta_rad: f64,
+        speed: f64,
+        alpha: f64,
+    ) -> (f64, f64, f64, f64) {
+        let dir = self.cfg.direction;
+        let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
+            LateralKind::Blend => {
+                let df = stanley_command(front, theta_rad, speed, dir, &self.gains());
+                let dr = rear_command(path, rear, theta_rad, speed, dir, &self.gains());
+                (alpha, df, dr)
+            }
+            LateralKind::Stanley => {
+                let df = stanley_command(front, theta_rad, speed, dir, &self.gains());
+                (1.0, df, f64::NAN)
+            }
+            LateralKind::PurePursuit => {
+                let dr = pure_pursuit_command(
+                    path,
+                    (rear_pt.x, rear_pt.y),
+                    rear,
+                    theta_rad,
+                    speed,
+                    dir,
+                    &self.gains(),
+                );
+                (0.0, f64::NAN, dr)
+            }
+        };
+        let raw = match self.cfg.lateral_controller {
+            LateralKind::Blend => blend(alpha, d_front, d_rear),
+            LateralKind::Stanley => d_front,
+            LateralKind::PurePursuit => d_rear,
+        };
+        (alpha, d_front, d_rear, raw)
+    }
+}
+
+/// A finite state within range and an alpha in [0, 1], or the error naming what is not.
+fn check_step_inputs(measured: &VehicleState, alpha: f64) -> Result<(), StateError> {
+    measured.check_finite()?;
+    for (name, value) in [("x_m", measured.x_m), ("y_m", measured.y_m)] {
+        if value.abs() > crate::limits::MAX_COORDINATE_M {
+            return Err(StateError::Parameter {
+                name,
+                value,
+                message: "position beyond 1e9 m: too far out for f64 to resolve the path",
+            });
+        }
+    }
+    if !(0.0..=1.0).contains(&alpha) {
+        return Err(StateError::Parameter {
+            name: "alpha",
+            value: alpha,
+            message: "must be in [0, 1]",
+        });
+    }
+    Ok(())
 }

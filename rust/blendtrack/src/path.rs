@@ -128,50 +128,7 @@ impl Path {
         closed: bool,
         location: impl Fn(usize) -> String,
     ) -> Result<Self, PathError> {
-        if let Some(w) = widths {
-            if w.len() != points.len() {
-                return Err(PathError::WidthCount {
-                    widths: w.len(),
-                    points: points.len(),
-                });
-            }
-        }
-        for (i, p) in points.iter().enumerate() {
-            for (what, v) in [("x", p[0]), ("y", p[1])] {
-                if !v.is_finite() {
-                    return Err(PathError::NonFinite {
-                        location: location(i),
-                        what,
-                        value: v,
-                    });
-                }
-                if v.abs() > crate::limits::MAX_COORDINATE_M {
-                    return Err(PathError::TooFar {
-                        location: location(i),
-                        what,
-                        value: v,
-                    });
-                }
-            }
-            if let Some(w) = widths {
-                for (what, v) in [("right width", w[i].right_m), ("left width", w[i].left_m)] {
-                    if !v.is_finite() {
-                        return Err(PathError::NonFinite {
-                            location: location(i),
-                            what,
-                            value: v,
-                        });
-                    }
-                    if v < 0.0 {
-                        return Err(PathError::NegativeWidth {
-                            location: location(i),
-                            what,
-                            value: v,
-                        });
-                    }
-                }
-            }
-        }
+        check_points(points, widths, &location)?;
         const EPS: f64 = 1e-9;
         let mut pts: Vec<Point2<f64>> = Vec::with_capacity(points.len());
         let mut ws: Vec<Widths> = Vec::with_capacity(points.len());
@@ -212,50 +169,9 @@ impl Path {
             s.push(s[i] + l);
         }
         let length = s[n_seg];
-        let vertex_heading = (0..n)
-            .map(|i| {
-                let (prev, next) = if closed {
-                    (Some((i + n_seg - 1) % n_seg), Some(i % n_seg))
-                } else {
-                    (i.checked_sub(1), if i < n_seg { Some(i) } else { None })
-                };
-                let t = match (prev, next) {
-                    (Some(a), Some(b)) => {
-                        let sum = seg_dir[a] + seg_dir[b];
-                        if sum.norm() < 1e-9 {
-                            seg_dir[b]
-                        } else {
-                            sum
-                        }
-                    }
-                    (Some(a), None) => seg_dir[a],
-                    (None, Some(b)) => seg_dir[b],
-                    (None, None) => unreachable!("a path has at least one segment"),
-                };
-                t.y.atan2(t.x)
-            })
-            .collect();
-        let chunk_boxes = (0..n_seg)
-            .step_by(CHUNK)
-            .map(|start| {
-                let mut lo = pts[start];
-                let mut hi = pts[start];
-                for k in start..(start + CHUNK).min(n_seg) {
-                    for q in [pts[k], pts[(k + 1) % n]] {
-                        lo = Point2::new(lo.x.min(q.x), lo.y.min(q.y));
-                        hi = Point2::new(hi.x.max(q.x), hi.y.max(q.y));
-                    }
-                }
-                (lo, hi)
-            })
-            .collect();
-        let n_seg = seg_len.len();
-        let bucket = (0..n_seg)
-            .map(|b| {
-                let at = b as f64 * length / n_seg as f64;
-                s[1..n_seg].partition_point(|&x| x <= at) as u32
-            })
-            .collect();
+        let vertex_heading = vertex_headings(&seg_dir, n, closed);
+        let chunk_boxes = chunk_boxes(&pts, n_seg);
+        let bucket = buckets(&s, length);
         Ok(Path {
             bucket,
             bucket_scale: n_seg as f64 / length,
@@ -1053,6 +969,119 @@ fn check_positive(name: &'static str, v: f64) -> Result<(), PathError> {
             message: "must be finite and > 0",
         })
     }
+}
+
+/// Every coordinate finite and within range, every width finite and
+/// non-negative, one width pair per point; errors name the point.
+fn check_points(
+    points: &[[f64; 2]],
+    widths: Option<&[Widths]>,
+    location: &impl Fn(usize) -> String,
+) -> Result<(), PathError> {
+    if let Some(w) = widths {
+        if w.len() != points.len() {
+            return Err(PathError::WidthCount {
+                widths: w.len(),
+                points: points.len(),
+            });
+        }
+    }
+    for (i, p) in points.iter().enumerate() {
+        for (what, v) in [("x", p[0]), ("y", p[1])] {
+            if !v.is_finite() {
+                return Err(PathError::NonFinite {
+                    location: location(i),
+                    what,
+                    value: v,
+                });
+            }
+            if v.abs() > crate::limits::MAX_COORDINATE_M {
+                return Err(PathError::TooFar {
+                    location: location(i),
+                    what,
+                    value: v,
+                });
+            }
+        }
+        if let Some(w) = widths {
+            for (what, v) in [("right width", w[i].right_m), ("left width", w[i].left_m)] {
+                if !v.is_finite() {
+                    return Err(PathError::NonFinite {
+                        location: location(i),
+                        what,
+                        value: v,
+                    });
+                }
+                if v < 0.0 {
+                    return Err(PathError::NegativeWidth {
+                        location: location(i),
+                        what,
+                        value: v,
+                    });
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Heading of the tangent at each vertex: the mean of its two segments'
+/// directions (one at an open path's ends).
+fn vertex_headings(seg_dir: &[Vector2<f64>], n: usize, closed: bool) -> Vec<f64> {
+    let n_seg = seg_dir.len();
+    (0..n)
+        .map(|i| {
+            let (prev, next) = if closed {
+                (Some((i + n_seg - 1) % n_seg), Some(i % n_seg))
+            } else {
+                (i.checked_sub(1), if i < n_seg { Some(i) } else { None })
+            };
+            let t = match (prev, next) {
+                (Some(a), Some(b)) => {
+                    let sum = seg_dir[a] + seg_dir[b];
+                    if sum.norm() < 1e-9 {
+                        seg_dir[b]
+                    } else {
+                        sum
+                    }
+                }
+                (Some(a), None) => seg_dir[a],
+                (None, Some(b)) => seg_dir[b],
+                (None, None) => unreachable!("a path has at least one segment"),
+            };
+            t.y.atan2(t.x)
+        })
+        .collect()
+}
+
+/// Bounding box of each run of `CHUNK` segments.
+fn chunk_boxes(pts: &[Point2<f64>], n_seg: usize) -> Vec<(Point2<f64>, Point2<f64>)> {
+    let n = pts.len();
+    (0..n_seg)
+        .step_by(CHUNK)
+        .map(|start| {
+            let mut lo = pts[start];
+            let mut hi = pts[start];
+            for k in start..(start + CHUNK).min(n_seg) {
+                for q in [pts[k], pts[(k + 1) % n]] {
+                    lo = Point2::new(lo.x.min(q.x), lo.y.min(q.y));
+                    hi = Point2::new(hi.x.max(q.x), hi.y.max(q.y));
+                }
+            }
+            (lo, hi)
+        })
+        .collect()
+}
+
+/// For each of `n_seg` equal arc-length buckets, the first segment in it.
+fn buckets(s: &[f64], length: f64) -> Vec<u32> {
+    let n_seg = s.len() - 1;
+    (0..n_seg)
+        .map(|b| {
+            let at = b as f64 * length / n_seg as f64;
+            s[1..n_seg].partition_point(|&x| x <= at) as u32
+        })
+        .collect()
 }
 
 #[cfg(test)]
