@@ -6,7 +6,9 @@ use crate::error::check_len;
 use crate::placement::{choose_move, Motion, Move};
 use crate::plan::Plan;
 use crate::signal::{signal_at, Signal};
-use crate::substep::{advance, control_record, held_speed, state_at, substeps, HeldGaps, LastStep};
+use crate::substep::{
+    advance, control_record, held_speed, past_route_end, state_at, substeps, HeldGaps, LastStep,
+};
 use crate::{Driven, RouteFleet, TrafficError};
 use blendtrack::path::wrap_angle;
 use blendtrack::{Fleet, FleetInputs, FleetOutputs, NextStates, VehicleState};
@@ -116,6 +118,7 @@ impl RouteFleet {
                 before: states,
                 advance: vec![0.0; plan.slots.len()],
                 h: dt_s,
+                skip_past_end: false,
             }
         } else {
             self.control_steps(&plan, dt_s, n)?
@@ -273,8 +276,11 @@ impl RouteFleet {
                 plan.limit[i],
                 last.h,
             );
-            if let Some(sample) = d.stats.add_step(&step, &st) {
-                self.samples.push(sample);
+            let past_end = last.skip_past_end && past_route_end(d, out.s_rear_m[i]);
+            if !past_end {
+                if let Some(sample) = d.stats.add_step(&step, &st) {
+                    self.samples.push(sample);
+                }
             }
             // Over the whole step (the last control step's with one).
             r.accel_mps2.push((v - d.state.v_mps) / dt_s);

@@ -109,6 +109,18 @@ pub(crate) struct LastStep {
     pub(crate) advance: Vec<f64>,
     /// Its length (s).
     pub(crate) h: f64,
+    /// Control steps that start with the front past the route's end are
+    /// left out of the statistics (see [`past_route_end`]); false with one
+    /// control step per simulator step, which takes every step as before.
+    pub(crate) skip_past_end: bool,
+}
+
+/// The front is past the end of its route at the start of a control step
+/// whose rear axle is at arc length `s_rear_m`: the simulator takes the
+/// vehicle out at its next step, and until then its controller tracks past
+/// the end of its path (errors of metres at a 1 s step), nothing to measure.
+pub(crate) fn past_route_end(d: &crate::Driven, s_rear_m: f64) -> bool {
+    s_rear_m + d.body.reach_m > d.route.length_m
 }
 
 impl RouteFleet {
@@ -155,6 +167,7 @@ impl RouteFleet {
                     before: states,
                     advance: moved,
                     h,
+                    skip_past_end: true,
                 });
             }
             let next = out.next.as_ref().expect("dt was given");
@@ -199,6 +212,9 @@ impl RouteFleet {
         let d = self.driven[slot as usize]
             .as_mut()
             .expect("planned slots are driven");
+        if past_route_end(d, out.s_rear_m[i]) {
+            return Ok(());
+        }
         if let Some(sample) = d.stats.add_step(&step, &st) {
             self.samples.push(sample);
         }
@@ -417,5 +433,30 @@ mod tests {
             e_old > e_fine + 0.01,
             "one control step per second: {e_old}"
         );
+    }
+
+    #[test]
+    fn control_steps_past_the_route_s_end_are_not_measured() {
+        // Front at 563.5 m at 15 m/s, route end 600 m: the control steps
+        // starting with the front at 563.5 + 0.75 k <= 600 m (k = 0..=48) are
+        // measured, the 31 after it (the simulator would have taken it out) not.
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(560.0, 15.0))
+            .unwrap() as i64;
+        for _ in 0..4 {
+            step_behind(&mut f, a, (f64::NAN, f64::NAN), 1.0);
+        }
+        assert_eq!(f.stats(a).unwrap().tracking.steps, 49);
+        assert_eq!(f.driven(a).unwrap().steps, 4);
+        // One control step per step takes every step, as before.
+        let (mut f, t) = fleet_with(road(None, true), settings(1.0));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(560.0, 15.0))
+            .unwrap() as i64;
+        for _ in 0..4 {
+            step_behind(&mut f, a, (f64::NAN, f64::NAN), 1.0);
+        }
+        assert_eq!(f.stats(a).unwrap().tracking.steps, 4);
     }
 }
