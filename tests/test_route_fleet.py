@@ -68,7 +68,7 @@ def test_red_light_holds_the_vehicle_and_moves_are_lane_moves() -> None:
     assert stats["steps"] == 800 and len(f) == 0
     # The finished values come with the sums they are made of.
     assert stats["lateral_error_rms_m"] == pytest.approx(math.sqrt(stats["sum_e2"] / 800), rel=1e-12)
-    assert stats["mean_speed_mps"] == pytest.approx(stats["sum_v"] / 400, rel=1e-12)
+    assert stats["mean_speed_mps"] == pytest.approx(stats["sum_v"] / 800, rel=1e-12)
     assert stats["long_jerk_rms_mps3"] == pytest.approx(math.sqrt(stats["sum_jerk2"] / stats["jerk_n"]), rel=1e-12)
     assert isinstance(stats["steps"], int) and isinstance(stats["sum_e2"], float)
 
