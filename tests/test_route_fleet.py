@@ -64,10 +64,11 @@ def test_red_light_holds_the_vehicle_and_moves_are_lane_moves() -> None:
         _step(f, [slot])
     assert f.s_front(slot) > 110.0
     stats = f.remove_vehicle(slot)
-    assert stats["steps"] == 400 and len(f) == 0
+    # 400 steps of 0.1 s at the default control rate (0.05 s): two control steps each.
+    assert stats["steps"] == 800 and len(f) == 0
     # The finished values come with the sums they are made of.
-    assert stats["lateral_error_rms_m"] == pytest.approx(math.sqrt(stats["sum_e2"] / 400), rel=1e-12)
-    assert stats["mean_speed_mps"] == pytest.approx(stats["sum_v"] / 400, rel=1e-12)
+    assert stats["lateral_error_rms_m"] == pytest.approx(math.sqrt(stats["sum_e2"] / 800), rel=1e-12)
+    assert stats["mean_speed_mps"] == pytest.approx(stats["sum_v"] / 800, rel=1e-12)
     assert stats["long_jerk_rms_mps3"] == pytest.approx(math.sqrt(stats["sum_jerk2"] / stats["jerk_n"]), rel=1e-12)
     assert isinstance(stats["steps"], int) and isinstance(stats["sum_e2"], float)
 

@@ -242,6 +242,7 @@ class RouteFleet:
         comfort_lateral_accel_mps2: float = 2.0,
         sample_every: int = 10,
         verify_every: int = 10,
+        control_dt_s: float = 0.05,
     ) -> RouteFleet: ...
     def add_route(
         self,

@@ -327,6 +327,7 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         border_margin_m=args.border_margin,
         stop_at_route_end=args.stop_at_route_end,
         tactical_lane_changes=args.tactical_lane_changes,
+        control_dt_s=args.control_dt,
         end_s=args.end,
         seed=args.seed,
         backend="traci" if args.gui else args.backend,
@@ -366,6 +367,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
         stop_at_route_end=args.stop_at_route_end,
         tactical_lane_changes=args.tactical_lane_changes,
         sumo_args=args.sumo_args,
+        control_dt_s=args.control_dt,
     )
     opts = compare.CompareOptions(
         baseline=args.baseline,
@@ -393,6 +395,15 @@ def _seeds(text: str) -> int:
 
 
 def _add_driving_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--control-dt",
+        type=_finite("control dt", 0.0, strict=True),
+        default=0.05,
+        metavar="S",
+        help="control rate in seconds (> 0; default 0.05): in every SUMO step the controllers and the bicycle model "
+        "run ceil(step / S) times, leaders and signals held for the step, and the vehicle is placed once; "
+        "S >= the step length gives one control step per SUMO step",
+    )
     parser.add_argument(
         "--border-margin",
         type=_finite("border margin", 0.0),

@@ -134,6 +134,7 @@ def _run_options(task: dict[str, Any]) -> Any:
         border_margin_m=p.get("border_margin_m", 0.0),
         stop_at_route_end=p.get("stop_at_route_end", False),
         tactical_lane_changes=p.get("tactical_lane_changes", False),
+        control_dt_s=p.get("control_dt_s", 0.05),
         config=config,
         vehicle=vehicle,
         fixed_keys=frozenset(keys),

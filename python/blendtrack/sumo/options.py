@@ -67,8 +67,17 @@ class RunOptions:
     #: merge). Experimental: tried on 2 networks and 3 seeds; on the urban
     #: grid it adds teleports (README, known limits).
     tactical_lane_changes: bool = False
+    #: The control rate (s, > 0): in every SUMO step of ``dt`` the
+    #: controllers and the bicycle model run ``ceil(dt / control_dt_s)``
+    #: times, with leaders and signals held for the step, and the vehicle is
+    #: placed once (docs/sumo.md, "Control rate and SUMO's step length").
+    #: ``control_dt_s >= dt`` gives one control step per SUMO step.
+    control_dt_s: float = 0.05
 
     def __post_init__(self) -> None:
         m = self.border_margin_m
         if not (isinstance(m, (int, float)) and math.isfinite(m) and m >= 0.0):
             raise ScenarioError(f"border margin {m!r} m: must be a finite number >= 0")
+        c = self.control_dt_s
+        if not (isinstance(c, (int, float)) and math.isfinite(c) and c > 0.0):
+            raise ScenarioError(f"control dt {c!r} s: must be a finite number > 0")

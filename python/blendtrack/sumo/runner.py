@@ -113,6 +113,7 @@ class SumoRun:
             lane_move_lateral_m=CHEAP_LATERAL_M,
             lane_move_heading_deg=math.degrees(CHEAP_HEADING_RAD),
             comfort_lateral_accel_mps2=scenario.comfort_lateral_accel_mps2,
+            control_dt_s=options.control_dt_s,
         )
         self.network = Network(scenario.net_file)
         self.tracks = Tracks(self.fleet, self.network, base_config, options.border_margin_m)
@@ -182,6 +183,7 @@ class SumoRun:
             "end_s": t_end,
             "steps": steps,
             "step_length_s": self.conn.dt,
+            "control_dt_s": self.opt.control_dt_s,
             "controlled_vehicles": len(records),
             "background_vehicles": len(self._background),
             "collisions": counts["collision_events"],

@@ -90,7 +90,7 @@ type ListedLeader = Option<(i64, f64)>;
 #[pymethods]
 impl RouteFleet {
     #[new]
-    #[pyo3(signature = (*, standstill_margin_m = 1.0, yield_lookahead_m = 30.0, lane_change_room_m = 15.0, stop_at_route_end = false, route_end_extra_m = 5.0, route_end_horizon_m = 200.0, lane_move_lateral_m = 0.15, lane_move_heading_deg = 2.0, comfort_lateral_accel_mps2 = 2.0, sample_every = 10, verify_every = 10))]
+    #[pyo3(signature = (*, standstill_margin_m = 1.0, yield_lookahead_m = 30.0, lane_change_room_m = 15.0, stop_at_route_end = false, route_end_extra_m = 5.0, route_end_horizon_m = 200.0, lane_move_lateral_m = 0.15, lane_move_heading_deg = 2.0, comfort_lateral_accel_mps2 = 2.0, sample_every = 10, verify_every = 10, control_dt_s = 0.05))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         standstill_margin_m: f64,
@@ -104,6 +104,7 @@ impl RouteFleet {
         comfort_lateral_accel_mps2: f64,
         sample_every: u64,
         verify_every: u64,
+        control_dt_s: f64,
     ) -> PyResult<Self> {
         let inner = CoreRouteFleet::new(TrafficSettings {
             standstill_margin_m,
@@ -117,6 +118,7 @@ impl RouteFleet {
             comfort_lateral_accel_mps2,
             sample_every,
             verify_every,
+            control_dt_s,
         })
         .map_err(|e| match e {
             TrafficError::Parameter {

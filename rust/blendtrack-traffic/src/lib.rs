@@ -34,6 +34,20 @@
 //!    heading, then the speed), or [`Move::Invalid`] (unusable state: hand
 //!    the vehicle back).
 //!
+//! Control rate. The controllers and the bicycle model run at their own
+//! rate, not the simulator's: [`RouteFleet::step`] over a simulator step of
+//! `dt` runs `n = ceil(dt / control_dt)` control steps of `h = dt / n`
+//! (`control_dt` in [`TrafficSettings`]). What the simulator reported at the
+//! start of its step is held for the whole step: each leader drives on at
+//! the speed it was observed at (its gap grows by its speed times `h` and
+//! shrinks by the vehicle's own advance each control step), stop lines stay
+//! where they are (their gap shrinks by the vehicle's advance), the stop-line
+//! decisions and speed limits of the plan hold. Statistics take every control
+//! step (weighted by `h` where they are times or distances, one sample each
+//! in the means, so means are time-weighted). The move into the simulator is
+//! chosen once, from the final state. With `control_dt >= dt` (`n = 1`) a step
+//! is one control step over `dt`.
+//!
 //! Lane positions. A vehicle is given to the simulator by lane while its
 //! control point is within `lane_move_lateral_m` (minus the track's own
 //! offset from the lane's centreline, [`Piece::offset_m`]) and
@@ -68,6 +82,7 @@ mod route;
 mod signal;
 mod stats;
 mod step;
+mod substep;
 #[cfg(test)]
 mod testkit;
 
@@ -126,6 +141,11 @@ pub struct TrafficSettings {
     /// Every this many steps of a vehicle the bridge reads where the
     /// simulator has it, to check the prediction (0: only where unknown).
     pub verify_every: u64,
+    /// The control rate (s, > 0): a [`RouteFleet::step`] over `dt` runs the
+    /// controllers and the bicycle model `n = ceil(dt / control_dt)` times
+    /// over `dt / n` each, with leaders and stop lines held for the step
+    /// (see the module docs); `control_dt >= dt` gives one control step.
+    pub control_dt_s: f64,
 }
 
 impl Default for TrafficSettings {
@@ -142,6 +162,7 @@ impl Default for TrafficSettings {
             comfort_lateral_accel_mps2: 2.0,
             sample_every: 10,
             verify_every: 10,
+            control_dt_s: 0.05,
         }
     }
 }
@@ -169,6 +190,9 @@ struct Driven {
     known: Option<(u32, f64)>,
     /// The speed last sent to the simulator (NaN before the first).
     sumo_speed: f64,
+    /// Simulator steps the vehicle was moved in (its statistics count
+    /// control steps, more than these when a step is sub-stepped).
+    steps: u64,
     stats: DriveStats,
 }
 
@@ -186,7 +210,7 @@ pub struct RouteFleet {
 
 impl RouteFleet {
     pub fn new(settings: TrafficSettings) -> Result<Self, TrafficError> {
-        let checks: [(&'static str, f64, bool); 8] = [
+        let checks: [(&'static str, f64, bool); 9] = [
             ("standstill_margin_m", settings.standstill_margin_m, false),
             ("yield_lookahead_m", settings.yield_lookahead_m, false),
             ("lane_change_room_m", settings.lane_change_room_m, false),
@@ -203,6 +227,7 @@ impl RouteFleet {
                 settings.comfort_lateral_accel_mps2,
                 true,
             ),
+            ("control_dt_s", settings.control_dt_s, true),
         ];
         for (name, value, strict) in checks {
             if !(value.is_finite() && if strict { value > 0.0 } else { value >= 0.0 }) {
@@ -332,6 +357,7 @@ impl RouteFleet {
             holding: None,
             known: None,
             sumo_speed: f64::NAN,
+            steps: 0,
             stats: DriveStats::default(),
         });
         Ok(slot)

@@ -314,12 +314,9 @@ mod tests {
             );
             // The speed sent is the vehicle's own (here scale 1).
             assert!((out.sumo_speed_mps[0] - out.v_mps[0]).abs() <= HOLD_SPEED_MPS + 1e-9);
-            // Checked every verify_every steps, else not asked for.
-            assert_eq!(
-                read,
-                f.stats(a).unwrap().tracking.steps % 10 == 0,
-                "step {k}"
-            );
+            // Checked every verify_every (simulator) steps, else not asked for.
+            assert_eq!(read, f.driven(a).unwrap().steps % 10 == 0, "step {k}");
+            assert_eq!(f.driven(a).unwrap().steps, k as u64 + 1);
         }
         assert!(counts[Move::Speed as usize] > 20, "{counts:?}");
         assert!(

@@ -108,7 +108,8 @@ mod tests {
 
     #[test]
     fn statistics_add_up_the_outputs() {
-        let (mut f, t) = fleet_on(road(None, true));
+        // One control step per step (each sub-step would count).
+        let (mut f, t) = fleet_with(road(None, true), one_control_step());
         let mut s0 = at(50.0, 10.0);
         s0.y_m = 0.7;
         let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
@@ -143,7 +144,7 @@ mod tests {
         // On the centreline, yawed by 0.1 rad: the rear axle is on the path,
         // the front axle (wheelbase 2.6 m ahead) 2.6 sin(0.1) m to the left,
         // the control point P(0.5) half of that.
-        let (mut f, t) = fleet_on(road(None, true));
+        let (mut f, t) = fleet_with(road(None, true), one_control_step());
         let mut s0 = at(50.0, 10.0);
         s0.theta_rad = 0.1;
         let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;

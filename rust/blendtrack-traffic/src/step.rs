@@ -6,7 +6,9 @@ use crate::error::check_len;
 use crate::placement::{choose_move, Motion, Move};
 use crate::plan::Plan;
 use crate::signal::{signal_at, Signal};
-use crate::stats::StepRecord;
+use crate::substep::{
+    advance, control_record, held_speed, past_route_end, state_at, substeps, HeldGaps, LastStep,
+};
 use crate::{Driven, RouteFleet, TrafficError};
 use blendtrack::path::wrap_angle;
 use blendtrack::{Fleet, FleetInputs, FleetOutputs, NextStates, VehicleState};
@@ -37,6 +39,9 @@ pub struct RouteOutputs {
     pub s_rear_m: Vec<f64>,
     pub curvature_per_m: Vec<f64>,
     pub virtual_obstacle_m: Vec<f64>,
+    /// The gap to the leader at the end of the step, the leader held at the
+    /// speed it was observed at (m; less the standstill margin; NaN: none).
+    pub leader_gap_m: Vec<f64>,
     /// The front crossed a stop line whose light is red in this step.
     pub red_light: Vec<bool>,
     /// A lane change is due where the vehicle now is: ask the simulator for room.
@@ -72,6 +77,7 @@ impl RouteOutputs {
             s_rear_m: Vec::with_capacity(n),
             curvature_per_m: Vec::with_capacity(n),
             virtual_obstacle_m: Vec::with_capacity(n),
+            leader_gap_m: Vec::with_capacity(n),
             red_light: Vec::with_capacity(n),
             lane_change_due: Vec::with_capacity(n),
             read_position: Vec::with_capacity(n),
@@ -86,8 +92,9 @@ impl RouteFleet {
     ///
     /// Stages: the yield answers become stop lines ([`Self::answer_yields`]),
     /// the planned vehicles' states are packed into the fleet's inputs and
-    /// stepped, then each vehicle's move is chosen, its red-light crossing
-    /// detected and its statistics accumulated ([`Self::step_vehicle`]).
+    /// stepped (at the control rate: [`Self::control_steps`]), then each
+    /// vehicle's move is chosen, its red-light crossing detected and its
+    /// statistics accumulated ([`Self::step_vehicle`]).
     pub fn step(&mut self, must_yield: &[bool], dt_s: f64) -> Result<RouteOutputs, TrafficError> {
         if !(dt_s.is_finite() && dt_s > 0.0) {
             return Err(TrafficError::Parameter {
@@ -102,11 +109,24 @@ impl RouteFleet {
         check_len("must_yield", plan.queries.len(), must_yield.len())?;
         let mut plan = self.plan.take().expect("checked above");
         self.answer_yields(&mut plan, must_yield);
-        let out = self.step_fleet(&plan, dt_s)?;
-        let next = out.next.as_ref().expect("dt was given");
+        let n = substeps(dt_s, self.settings.control_dt_s);
+        let last = if n == 1 {
+            let states = self.planned_states(&plan);
+            let out = self.step_fleet(&plan, &states, HeldGaps::of_plan(&plan), dt_s)?;
+            LastStep {
+                out,
+                before: states,
+                advance: vec![0.0; plan.slots.len()],
+                h: dt_s,
+                skip_past_end: false,
+            }
+        } else {
+            self.control_steps(&plan, dt_s, n)?
+        };
+        let next = last.out.next.as_ref().expect("dt was given");
         let mut r = RouteOutputs::with_capacity(plan.slots.len());
         for i in 0..plan.slots.len() {
-            self.step_vehicle(&plan, i, &out, next, dt_s, &mut r)?;
+            self.step_vehicle(&plan, i, &last, next, dt_s, &mut r)?;
         }
         Ok(r)
     }
@@ -132,16 +152,32 @@ impl RouteFleet {
         }
     }
 
-    /// Stage 2: the planned vehicles' states and the plan's leaders, stop
-    /// lines and limits packed into the fleet's inputs, stepped over `dt_s`.
-    fn step_fleet(&mut self, plan: &Plan, dt_s: f64) -> Result<FleetOutputs, TrafficError> {
+    /// The planned vehicles' states, in the plan's order.
+    pub(crate) fn planned_states(&self, plan: &Plan) -> Vec<VehicleState> {
+        plan.slots
+            .iter()
+            .map(|&slot| {
+                self.driven[slot as usize]
+                    .as_ref()
+                    .expect("planned slots are driven")
+                    .state
+            })
+            .collect()
+    }
+
+    /// Stage 2: `states` (one per planned slot) and the plan's leaders, stop
+    /// lines and limits (with the gaps of `gaps`) packed into the fleet's
+    /// inputs, stepped over `dt_s`.
+    pub(crate) fn step_fleet(
+        &mut self,
+        plan: &Plan,
+        states: &[VehicleState],
+        gaps: HeldGaps<'_>,
+        dt_s: f64,
+    ) -> Result<FleetOutputs, TrafficError> {
         let n = plan.slots.len();
         let mut cols: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
-        for &slot in &plan.slots {
-            let s = self.driven[slot as usize]
-                .as_ref()
-                .expect("planned slots are driven")
-                .state;
+        for s in states {
             for (c, x) in cols
                 .iter_mut()
                 .zip([s.x_m, s.y_m, s.theta_rad, s.v_mps, s.delta_rad])
@@ -150,10 +186,10 @@ impl RouteFleet {
             }
         }
         let inputs = FleetInputs {
-            leader_gap_m: Some(&plan.leader_gap),
+            leader_gap_m: Some(gaps.leader),
             leader_speed_mps: Some(&plan.leader_speed),
-            stop_gap_m: Some(&plan.stop_gap),
-            soft_gap_m: Some(&plan.soft_gap),
+            stop_gap_m: Some(gaps.stop),
+            soft_gap_m: Some(gaps.soft),
             soft_speed_mps: Some(&plan.soft_speed),
             speed_limit_mps: Some(&plan.limit),
             dt_s: Some(dt_s),
@@ -171,28 +207,24 @@ impl RouteFleet {
 
     /// Stage 3, per vehicle: where its front is on its track after the
     /// step, the move that puts it into the simulator, a red-light
-    /// crossing, its statistics, and its row of the outputs.
+    /// crossing, its statistics (of the last control step), and its row of
+    /// the outputs.
     fn step_vehicle(
         &mut self,
         plan: &Plan,
         i: usize,
-        out: &FleetOutputs,
+        last: &LastStep,
         next: &NextStates,
         dt_s: f64,
         r: &mut RouteOutputs,
     ) -> Result<(), TrafficError> {
+        let out = &last.out;
         let slot = plan.slots[i] as usize;
         let params = *self.fleet.vehicle_params(slot as i64)?;
         let d = self.driven[slot]
             .as_mut()
             .expect("planned slots are driven");
-        let state = VehicleState {
-            x_m: next.x_m[i],
-            y_m: next.y_m[i],
-            theta_rad: next.theta_rad[i],
-            v_mps: next.v_mps[i],
-            delta_rad: next.delta_rad[i],
-        };
+        let state = state_at(next, i);
         let finite = [
             state.x_m,
             state.y_m,
@@ -235,23 +267,24 @@ impl RouteFleet {
             if let Some(lc) = d.route.lane_change {
                 due = piece.edge == lc.edge && piece.lane_index != lc.target_index;
             }
-            let acc = (v - d.state.v_mps) / dt_s;
-            let step = StepRecord {
-                lateral_error_m: motion.lateral_error_m,
-                lateral_error_rear_m: out.lateral_error_rear_m[i],
-                lateral_error_front_m: out.lateral_error_front_m[i],
-                heading_error_rad: motion.heading_error_rad,
-                v_mps: v,
-                accel_mps2: acc,
-                lateral_accel_mps2: v * v * state.delta_rad.tan() / params.wheelbase_m,
-                curvature_per_m: out.curvature_per_m[i],
-                speed_limit_mps: plan.limit[i],
-                dt_s,
-            };
-            if let Some(sample) = d.stats.add_step(&step, &st) {
-                self.samples.push(sample);
+            let step = control_record(
+                out,
+                i,
+                &last.before[i],
+                &state,
+                params.wheelbase_m,
+                plan.limit[i],
+                last.h,
+            );
+            let past_end = last.skip_past_end && past_route_end(d, out.s_rear_m[i]);
+            if !past_end {
+                if let Some(sample) = d.stats.add_step(&step, &st) {
+                    self.samples.push(sample);
+                }
             }
-            r.accel_mps2.push(acc);
+            // Over the whole step (the last control step's with one).
+            r.accel_mps2.push((v - d.state.v_mps) / dt_s);
+            d.steps += 1;
             d.state = state;
             d.s_front_m = sf_new;
             d.known = p.predicted;
@@ -278,10 +311,15 @@ impl RouteFleet {
         r.s_rear_m.push(out.s_rear_m[i]);
         r.curvature_per_m.push(out.curvature_per_m[i]);
         r.virtual_obstacle_m.push(out.virtual_obstacle_m[i]);
+        let moved = advance(&last.before[i], &state);
+        r.leader_gap_m.push(
+            plan.leader_gap[i] + held_speed(plan.leader_speed[i]) * dt_s
+                - (last.advance[i] + moved),
+        );
         r.red_light.push(red);
         r.lane_change_due.push(due);
         // Read back where the prediction ends, and now and then to check it.
-        let verify = st.verify_every > 0 && d.stats.tracking.steps % st.verify_every == 0;
+        let verify = st.verify_every > 0 && d.steps % st.verify_every == 0;
         r.read_position
             .push(p.mv != Move::Invalid && (d.known.is_none() || verify));
         r.sumo_speed_mps.push(p.sumo_speed);

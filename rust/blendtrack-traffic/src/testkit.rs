@@ -64,6 +64,14 @@ pub(crate) fn fleet_on(route: (Path, Route)) -> (RouteFleet, i64) {
     fleet_with(route, TrafficSettings::default())
 }
 
+/// Settings with one control step per step of `DT`.
+pub(crate) fn one_control_step() -> TrafficSettings {
+    TrafficSettings {
+        control_dt_s: DT,
+        ..Default::default()
+    }
+}
+
 pub(crate) fn fleet_with(route: (Path, Route), settings: TrafficSettings) -> (RouteFleet, i64) {
     let mut f = RouteFleet::new(settings).unwrap();
     let cfg = ControllerConfig {

@@ -1,0 +1,462 @@
+//! The control rate inside one simulator step ([`RouteFleet::step`]): a
+//! step of `dt` is `n = ceil(dt / control_dt)` control steps of `h = dt / n`
+//! with what the simulator reported held for the step (see the crate docs),
+//! each control step but the last taken into the statistics here; the last
+//! one goes on to the choice of the move ([`LastStep`]).
+
+use crate::plan::Plan;
+use crate::stats::StepRecord;
+use crate::{RouteFleet, TrafficError};
+use blendtrack::{FleetOutputs, NextStates, VehicleState};
+
+/// A few parts per billion of `control_dt` are forgiven, so that a step of
+/// exactly `k control_dt` in floating point is `k` control steps, not `k + 1`.
+const RATE_SLACK: f64 = 1e-9;
+
+/// The number of control steps in a simulator step of `dt_s`:
+/// `ceil(dt / control_dt)` (less [`RATE_SLACK`]), at least 1.
+pub(crate) fn substeps(dt_s: f64, control_dt_s: f64) -> usize {
+    let n = (dt_s / control_dt_s - RATE_SLACK).ceil();
+    if n >= 1.0 {
+        n as usize
+    } else {
+        1
+    }
+}
+
+/// The speed an obstacle is held at: its observed speed, forwards only
+/// (the fleet takes a NaN speed as standing, and so does this).
+pub(crate) fn held_speed(v_mps: f64) -> f64 {
+    if v_mps.is_finite() {
+        v_mps.max(0.0)
+    } else {
+        0.0
+    }
+}
+
+/// How far a vehicle got from `from` to `to` (m): the rear axle's
+/// displacement. The bicycle model never drives against its direction of
+/// travel, so this is its advance along it (a chord of the arc it drove,
+/// shorter than the arc by under 0.1 mm at 30 m/s, h = 0.05 s, 1/100 m curvature).
+pub(crate) fn advance(from: &VehicleState, to: &VehicleState) -> f64 {
+    (to.x_m - from.x_m).hypot(to.y_m - from.y_m)
+}
+
+/// Row `i` of the fleet's next states.
+pub(crate) fn state_at(next: &NextStates, i: usize) -> VehicleState {
+    VehicleState {
+        x_m: next.x_m[i],
+        y_m: next.y_m[i],
+        theta_rad: next.theta_rad[i],
+        v_mps: next.v_mps[i],
+        delta_rad: next.delta_rad[i],
+    }
+}
+
+/// The statistics' record of one control step of `h_s` of row `i` of
+/// `out`, from `before` to `state`.
+pub(crate) fn control_record(
+    out: &FleetOutputs,
+    i: usize,
+    before: &VehicleState,
+    state: &VehicleState,
+    wheelbase_m: f64,
+    speed_limit_mps: f64,
+    h_s: f64,
+) -> StepRecord {
+    let v = state.v_mps;
+    StepRecord {
+        lateral_error_m: out.lateral_error_m[i],
+        lateral_error_rear_m: out.lateral_error_rear_m[i],
+        lateral_error_front_m: out.lateral_error_front_m[i],
+        heading_error_rad: out.heading_error_rad[i],
+        v_mps: v,
+        accel_mps2: (v - before.v_mps) / h_s,
+        lateral_accel_mps2: v * v * state.delta_rad.tan() / wheelbase_m,
+        curvature_per_m: out.curvature_per_m[i],
+        speed_limit_mps,
+        dt_s: h_s,
+    }
+}
+
+/// The gaps of one control step, one per planned slot (NaN/inf: none).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct HeldGaps<'a> {
+    pub(crate) leader: &'a [f64],
+    pub(crate) stop: &'a [f64],
+    pub(crate) soft: &'a [f64],
+}
+
+impl<'a> HeldGaps<'a> {
+    /// The plan's own gaps: those at the start of the step.
+    pub(crate) fn of_plan(plan: &'a Plan) -> Self {
+        HeldGaps {
+            leader: &plan.leader_gap,
+            stop: &plan.stop_gap,
+            soft: &plan.soft_gap,
+        }
+    }
+}
+
+/// The last control step of a simulator step.
+#[derive(Debug, Clone)]
+pub(crate) struct LastStep {
+    /// The fleet's outputs (errors of `before`, next states).
+    pub(crate) out: FleetOutputs,
+    /// The states it started from, one per planned slot.
+    pub(crate) before: Vec<VehicleState>,
+    /// Each vehicle's advance from the start of the simulator step to `before` (m).
+    pub(crate) advance: Vec<f64>,
+    /// Its length (s).
+    pub(crate) h: f64,
+    /// Control steps that start with the front past the route's end are
+    /// left out of the statistics (see [`past_route_end`]); false with one
+    /// control step per simulator step, which takes every step as before.
+    pub(crate) skip_past_end: bool,
+}
+
+/// The front is past the end of its route at the start of a control step
+/// whose rear axle is at arc length `s_rear_m`: the simulator takes the
+/// vehicle out at its next step, and until then its controller tracks past
+/// the end of its path (errors of metres at a 1 s step), nothing to measure.
+pub(crate) fn past_route_end(d: &crate::Driven, s_rear_m: f64) -> bool {
+    s_rear_m + d.body.reach_m > d.route.length_m
+}
+
+impl RouteFleet {
+    /// Stage 2 at the control rate, `n` > 1 control steps of `dt_s / n`:
+    /// every control step but the last is stepped and taken into the
+    /// statistics; the last is stepped and returned. Leaders drive on at their
+    /// observed speed, stop lines stay, so each gap at time `t` into the step
+    /// is the plan's gap, plus the obstacle's speed times `t`, less the
+    /// vehicle's advance. The speed limits and stop-line decisions are the
+    /// plan's. A vehicle whose state turns unusable stays so (NaN) to the
+    /// last control step, which hands it back.
+    pub(crate) fn control_steps(
+        &mut self,
+        plan: &Plan,
+        dt_s: f64,
+        n: usize,
+    ) -> Result<LastStep, TrafficError> {
+        let h = dt_s / n as f64;
+        let m = plan.slots.len();
+        let mut states = self.planned_states(plan);
+        let mut moved = vec![0.0; m];
+        let mut leader = plan.leader_gap.clone();
+        let mut stop = plan.stop_gap.clone();
+        let mut soft = plan.soft_gap.clone();
+        for k in 0..n {
+            if k > 0 {
+                let t = k as f64 * h;
+                for i in 0..m {
+                    leader[i] =
+                        plan.leader_gap[i] + held_speed(plan.leader_speed[i]) * t - moved[i];
+                    soft[i] = plan.soft_gap[i] + held_speed(plan.soft_speed[i]) * t - moved[i];
+                    stop[i] = plan.stop_gap[i] - moved[i];
+                }
+            }
+            let gaps = HeldGaps {
+                leader: &leader,
+                stop: &stop,
+                soft: &soft,
+            };
+            let out = self.step_fleet(plan, &states, gaps, h)?;
+            if k + 1 == n {
+                return Ok(LastStep {
+                    out,
+                    before: states,
+                    advance: moved,
+                    h,
+                    skip_past_end: true,
+                });
+            }
+            let next = out.next.as_ref().expect("dt was given");
+            for (i, before) in states.iter_mut().enumerate() {
+                let state = state_at(next, i);
+                self.record_control_step(plan, i, &out, before, &state, h)?;
+                moved[i] += advance(before, &state);
+                *before = state;
+            }
+        }
+        unreachable!("n > 1 control steps return at the last")
+    }
+
+    /// A control step (not the last of its simulator step) of planned entry
+    /// `i` into its statistics, when it is usable.
+    fn record_control_step(
+        &mut self,
+        plan: &Plan,
+        i: usize,
+        out: &FleetOutputs,
+        before: &VehicleState,
+        state: &VehicleState,
+        h: f64,
+    ) -> Result<(), TrafficError> {
+        let finite = [
+            state.x_m,
+            state.y_m,
+            state.theta_rad,
+            state.v_mps,
+            state.delta_rad,
+            out.s_rear_m[i],
+        ]
+        .iter()
+        .all(|x| x.is_finite());
+        if !(out.ok[i] && finite) {
+            return Ok(());
+        }
+        let slot = plan.slots[i];
+        let wheelbase = self.fleet.vehicle_params(slot)?.wheelbase_m;
+        let step = control_record(out, i, before, state, wheelbase, plan.limit[i], h);
+        let st = self.settings;
+        let d = self.driven[slot as usize]
+            .as_mut()
+            .expect("planned slots are driven");
+        if past_route_end(d, out.s_rear_m[i]) {
+            return Ok(());
+        }
+        if let Some(sample) = d.stats.add_step(&step, &st) {
+            self.samples.push(sample);
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::substeps;
+    use crate::testkit::*;
+    use crate::*;
+    use blendtrack::{Fleet, FleetInputs};
+
+    const H: f64 = 0.05;
+
+    fn settings(control_dt_s: f64) -> TrafficSettings {
+        TrafficSettings {
+            control_dt_s,
+            ..Default::default()
+        }
+    }
+
+    /// One plan + step of `dt` for one vehicle behind a leader (gap, speed;
+    /// NaN: none).
+    fn step_behind(f: &mut RouteFleet, slot: i64, leader: (f64, f64), dt: f64) -> RouteOutputs {
+        f.plan(&Observations {
+            slots: &[slot],
+            leader_gap_m: &[leader.0],
+            leader_slot: &[-1],
+            leader_speed_mps: &[leader.1],
+            lane: &[-1],
+            lane_pos_m: &[f64::NAN],
+            soft: None,
+        })
+        .unwrap();
+        f.step(&[], dt).unwrap()
+    }
+
+    /// The core fleet on `road(None, true)`'s path with the test config,
+    /// stepped `n` times over `h` from `s0` behind a leader at `gap(k, x_k)`
+    /// (NaN: none) driving at `v_leader`: the final state.
+    fn reference(
+        s0: VehicleState,
+        n: usize,
+        gap: impl Fn(usize, f64) -> f64,
+        v_leader: f64,
+    ) -> VehicleState {
+        let mut fleet = Fleet::new();
+        let cfg = ControllerConfig {
+            preferred_speed: 15.0,
+            ..Default::default()
+        };
+        let t = fleet.add_track(road(None, true).0, cfg).unwrap() as i64;
+        let slot = [fleet.add_vehicle(t, None, None).unwrap() as i64];
+        let mut s = s0;
+        for k in 0..n {
+            let out = fleet
+                .step(&FleetInputs {
+                    leader_gap_m: Some(&[gap(k, s.x_m)]),
+                    leader_speed_mps: Some(&[v_leader]),
+                    stop_gap_m: Some(&[f64::NAN]),
+                    soft_gap_m: Some(&[f64::NAN]),
+                    soft_speed_mps: Some(&[f64::NAN]),
+                    speed_limit_mps: Some(&[20.0]),
+                    dt_s: Some(H),
+                    ..FleetInputs::new(
+                        &slot,
+                        &[s.x_m],
+                        &[s.y_m],
+                        &[s.theta_rad],
+                        &[s.v_mps],
+                        &[s.delta_rad],
+                    )
+                })
+                .unwrap();
+            let next = out.next.unwrap();
+            s = VehicleState {
+                x_m: next.x_m[0],
+                y_m: next.y_m[0],
+                theta_rad: next.theta_rad[0],
+                v_mps: next.v_mps[0],
+                delta_rad: next.delta_rad[0],
+            };
+        }
+        s
+    }
+
+    #[test]
+    fn a_step_is_ceil_dt_over_control_dt_control_steps() {
+        assert_eq!(substeps(0.1, 0.05), 2);
+        assert_eq!(substeps(1.0, 0.05), 20);
+        assert_eq!(substeps(0.1, 0.1), 1);
+        assert_eq!(substeps(0.3, 0.1), 3, "0.3 / 0.1 = 2.9999999999999996");
+        assert_eq!(substeps(0.25, 0.1), 3);
+        assert_eq!(substeps(0.01, 0.05), 1);
+        assert_eq!(substeps(0.1, 1.0), 1);
+        assert!(matches!(
+            RouteFleet::new(settings(0.0)),
+            Err(TrafficError::Parameter {
+                name: "control_dt_s",
+                ..
+            })
+        ));
+        assert!(RouteFleet::new(settings(f64::NAN)).is_err());
+    }
+
+    #[test]
+    fn n_control_steps_are_n_steps_of_the_fleet() {
+        // Off the centreline and below its preferred speed: it steers and
+        // accelerates in every control step.
+        let mut s0 = at(50.0, 10.0);
+        s0.y_m = 0.4;
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        let out = step_behind(&mut f, a, (f64::NAN, f64::NAN), 8.0 * H);
+        let want = reference(s0, 8, |_, _| f64::NAN, f64::NAN);
+        assert_eq!(f.state(a).unwrap(), want);
+        assert_eq!(
+            (out.x_m[0], out.y_m[0], out.v_mps[0]),
+            (want.x_m, want.y_m, want.v_mps)
+        );
+        let stats = f.stats(a).unwrap().tracking;
+        assert_eq!(stats.steps, 8, "each control step is counted");
+        // Mean acceleration over the step in the outputs.
+        assert!((out.accel_mps2[0] - (want.v_mps - 10.0) / (8.0 * H)).abs() < 1e-9);
+        // The same step at control_dt = dt is one step of the fleet over dt:
+        // a different (coarser) state.
+        let (mut g, t) = fleet_with(road(None, true), settings(8.0 * H));
+        let b = g.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        step_behind(&mut g, b, (f64::NAN, f64::NAN), 8.0 * H);
+        assert_ne!(g.state(b).unwrap(), want);
+        assert_eq!(g.stats(b).unwrap().tracking.steps, 1);
+    }
+
+    #[test]
+    fn a_held_leader_drives_on_at_its_observed_speed() {
+        // Far behind a slower leader, at its preferred speed: no braking, so
+        // over 1 s the gap shrinks by exactly (v - v_leader) dt.
+        let margin = TrafficSettings::default().standstill_margin_m;
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(50.0, 15.0))
+            .unwrap() as i64;
+        let out = step_behind(&mut f, a, (300.0, 10.0), 1.0);
+        assert_eq!(f.state(a).unwrap().v_mps, 15.0);
+        let want = 300.0 - margin - (15.0 - 10.0) * 1.0;
+        assert!(
+            (out.leader_gap_m[0] - want).abs() < 1e-9,
+            "{}",
+            out.leader_gap_m[0]
+        );
+        // Close behind it: it brakes, and each control step sees the gap the
+        // leader's held speed and the vehicle's own advance leave.
+        let s0 = at(50.0, 15.0);
+        let g0 = 25.0;
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        let out = step_behind(&mut f, a, (g0, 10.0), 1.0);
+        let held = |k: usize, x: f64| g0 - margin + 10.0 * k as f64 * H - (x - s0.x_m);
+        let want = reference(s0, 20, held, 10.0);
+        let got = f.state(a).unwrap();
+        for (g, w) in [
+            (got.x_m, want.x_m),
+            (got.v_mps, want.v_mps),
+            (got.y_m, want.y_m),
+        ] {
+            assert!((g - w).abs() < 1e-9, "{g} vs {w}");
+        }
+        assert!(got.v_mps < 14.0, "it braked: {}", got.v_mps);
+        let moved = got.x_m - s0.x_m;
+        assert!((out.leader_gap_m[0] - (g0 - margin + 10.0 - moved)).abs() < 1e-9);
+        // A leader held in place (its gap at the start all step long) is another thing.
+        let stale = reference(s0, 20, |_, _| g0 - margin, 10.0);
+        assert!((stale.v_mps - got.v_mps).abs() > 1e-3);
+    }
+
+    #[test]
+    fn at_one_second_steps_a_red_light_still_stops_the_vehicle_before_its_line() {
+        let (mut f, t) = fleet_with(road(Some((0, 0)), false), settings(H));
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(100.0, 12.0))
+            .unwrap() as i64;
+        f.set_signal(0, &[Signal::Stop]).unwrap();
+        for _ in 0..40 {
+            let out = step_behind(&mut f, slot, (f64::NAN, f64::NAN), 1.0);
+            assert!(!out.red_light[0]);
+        }
+        let sf = f.s_front(slot).unwrap();
+        assert!((195.0..200.0).contains(&sf), "front {sf} m");
+        assert!(f.state(slot).unwrap().v_mps.abs() < 0.05);
+        assert_eq!(f.stats(slot).unwrap().tracking.steps, 40 * 20);
+    }
+
+    #[test]
+    fn at_one_second_steps_an_offset_vehicle_settles_as_at_a_tenth() {
+        // 0.5 m off the centreline: after 10 s the lateral error and the
+        // speed are those of the 0.1 s run, at a control rate of 0.05 s.
+        let run = |dt: f64, control_dt: f64| {
+            let (mut f, t) = fleet_with(road(None, true), settings(control_dt));
+            let mut s0 = at(20.0, 12.0);
+            s0.y_m = 0.5;
+            let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+            for _ in 0..(10.0 / dt).round() as usize {
+                step_behind(&mut f, a, (f64::NAN, f64::NAN), dt);
+            }
+            let s = f.stats(a).unwrap().tracking;
+            (s.lateral_error_mean_abs_m(), f.state(a).unwrap())
+        };
+        let (e_fine, fine) = run(0.1, H);
+        let (e_coarse, coarse) = run(1.0, H);
+        assert!((e_fine - e_coarse).abs() < 1e-9, "{e_fine} vs {e_coarse}");
+        assert_eq!(fine, coarse, "the same control steps");
+        let (e_old, _) = run(1.0, 1.0);
+        assert!(
+            e_old > e_fine + 0.01,
+            "one control step per second: {e_old}"
+        );
+    }
+
+    #[test]
+    fn control_steps_past_the_route_s_end_are_not_measured() {
+        // Front at 563.5 m at 15 m/s, route end 600 m: the control steps
+        // starting with the front at 563.5 + 0.75 k <= 600 m (k = 0..=48) are
+        // measured, the 31 after it (the simulator would have taken it out) not.
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(560.0, 15.0))
+            .unwrap() as i64;
+        for _ in 0..4 {
+            step_behind(&mut f, a, (f64::NAN, f64::NAN), 1.0);
+        }
+        assert_eq!(f.stats(a).unwrap().tracking.steps, 49);
+        assert_eq!(f.driven(a).unwrap().steps, 4);
+        // One control step per step takes every step, as before.
+        let (mut f, t) = fleet_with(road(None, true), settings(1.0));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(560.0, 15.0))
+            .unwrap() as i64;
+        for _ in 0..4 {
+            step_behind(&mut f, a, (f64::NAN, f64::NAN), 1.0);
+        }
+        assert_eq!(f.stats(a).unwrap().tracking.steps, 4);
+    }
+}
