@@ -33,7 +33,7 @@ import sys
 import warnings
 from collections.abc import Sequence
 from pathlib import Path as FsPath
-from typing import NoReturn
+from typing import Any, NoReturn
 
 import blendtrack
 
@@ -67,19 +67,25 @@ def _cmd_version(args: argparse.Namespace) -> int:
     return 0
 
 
-def _finite(kind: str, low: float | None = None, strict: bool = False, high: float | None = None):  # type: ignore[no-untyped-def]
-    """argparse type: a finite float within bounds."""
+def _bounded(kind: str, whole: bool, low: float | None, high: float | None, strict: bool = False, bounds: str | None = None):  # type: ignore[no-untyped-def]
+    """argparse type: a finite number (a whole one with ``whole``) in
+    [low, high] (low excluded with ``strict``); ``bounds`` words the range in
+    the error instead of the two separate limits."""
 
-    def parse(text: str) -> float:
+    def parse(text: str) -> float | int:
         try:
-            value = float(text)
+            value: float | int = int(text) if whole else float(text)
         except ValueError:
-            raise argparse.ArgumentTypeError(f"{kind} must be a number, got {text!r}") from None
+            raise argparse.ArgumentTypeError(f"{kind} must be a {'whole number' if whole else 'number'}, got {text!r}") from None
         if not math.isfinite(value):
             raise argparse.ArgumentTypeError(f"{kind} must be finite, got {text!r}")
-        if low is not None and (value <= low if strict else value < low):
+        below = low is not None and (value <= low if strict else value < low)
+        above = high is not None and value > high
+        if bounds is not None and (below or above):
+            raise argparse.ArgumentTypeError(f"{kind} must be in {bounds}, got {text}")
+        if below:
             raise argparse.ArgumentTypeError(f"{kind} must be {'>' if strict else '>='} {low:g}, got {text}")
-        if high is not None and value > high:
+        if above:
             raise argparse.ArgumentTypeError(f"{kind} must be <= {high:g}, got {text}")
         return value
 
@@ -87,15 +93,20 @@ def _finite(kind: str, low: float | None = None, strict: bool = False, high: flo
     return parse
 
 
-def _seed(text: str) -> int:
-    """argparse type: a seed, a whole number in [0, 2**64) (the core's u64)."""
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seed must be a whole number, got {text!r}") from None
-    if not 0 <= value < 2**64:
-        raise argparse.ArgumentTypeError(f"seed must be in [0, 2**64), got {text}")
-    return value
+def _finite(kind: str, low: float | None = None, strict: bool = False, high: float | None = None):  # type: ignore[no-untyped-def]
+    """argparse type: a finite float within bounds."""
+    return _bounded(kind, False, low, high, strict)
+
+
+def _whole(what: str, low: int = 1, high: int | None = None, bounds: str | None = None):  # type: ignore[no-untyped-def]
+    """argparse type: a whole number in [low, high]."""
+    return _bounded(what, True, low, high, bounds=bounds)
+
+
+#: argparse type of a seed: the core's u64.
+_seed = _whole("seed", 0, 2**64 - 1, bounds="[0, 2**64)")
+#: argparse type of compare's --seeds.
+_seeds = _whole("seeds")
 
 
 def _alpha_value(text: str) -> float | str:
@@ -310,16 +321,13 @@ def _sumo_config(
     return config, vehicle, sumo.config_keys(file)
 
 
-def _cmd_sumo_run(args: argparse.Namespace) -> int:
+def _run_options(args: argparse.Namespace, **extra: Any) -> Any:
+    """The RunOptions of the options `sumo run` and `compare` share
+    (_add_scenario_options, _add_output_options), plus ``extra``."""
     from blendtrack import sumo
-    from blendtrack.sumo.selection import parse_ids
 
-    scenario = sumo.resolve_scenario(args.scenario)
     config, vehicle, keys = _sumo_config(args.config)
-    options = sumo.RunOptions(
-        controlled_fraction=args.controlled_fraction,
-        controlled_type=args.controlled_type,
-        controlled_ids=parse_ids(args.controlled_ids or ()),
+    return sumo.RunOptions(
         alpha=args.alpha,
         config=config,
         vehicle=vehicle,
@@ -328,6 +336,21 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         stop_at_route_end=args.stop_at_route_end,
         tactical_lane_changes=args.tactical_lane_changes,
         control_dt_s=args.control_dt,
+        sumo_args=args.sumo_args,
+        **extra,
+    )
+
+
+def _cmd_sumo_run(args: argparse.Namespace) -> int:
+    from blendtrack import sumo
+    from blendtrack.sumo.selection import parse_ids
+
+    scenario = sumo.resolve_scenario(args.scenario)
+    options = _run_options(
+        args,
+        controlled_fraction=args.controlled_fraction,
+        controlled_type=args.controlled_type,
+        controlled_ids=parse_ids(args.controlled_ids or ()),
         end_s=args.end,
         seed=args.seed,
         backend="traci" if args.gui else args.backend,
@@ -335,7 +358,6 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         trace=args.trace,
         fcd=args.fcd,
         ssm=args.ssm,
-        sumo_args=args.sumo_args,
         progress=not args.quiet,
     )
     out = FsPath(args.out)
@@ -357,18 +379,7 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     from blendtrack.sumo import compare
 
     scenario = sumo.resolve_scenario(args.scenario)
-    config, vehicle, keys = _sumo_config(args.config)
-    run = sumo.RunOptions(
-        alpha=args.alpha,
-        config=config,
-        vehicle=vehicle,
-        fixed_keys=frozenset(keys),
-        border_margin_m=args.border_margin,
-        stop_at_route_end=args.stop_at_route_end,
-        tactical_lane_changes=args.tactical_lane_changes,
-        sumo_args=args.sumo_args,
-        control_dt_s=args.control_dt,
-    )
+    run = _run_options(args)
     opts = compare.CompareOptions(
         baseline=args.baseline,
         controlled_fraction=args.controlled_fraction,
@@ -384,14 +395,52 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
-def _seeds(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seeds must be a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"seeds must be >= 1, got {text}")
-    return value
+def _add_scenario_options(parser: argparse.ArgumentParser, ids: bool) -> None:
+    """The scenario and what drives it, shared by `sumo run` and `compare`:
+    the selection of controlled vehicles, alpha, config and driving options."""
+    parser.add_argument(
+        "scenario", metavar="SCENARIO", help="scenario name or folder, or a SUMO configuration file (.sumocfg, .cfg, .xml)"
+    )
+    which = parser.add_mutually_exclusive_group()
+    which.add_argument(
+        "--controlled-fraction",
+        type=_finite("fraction", 0.0, high=1.0),
+        metavar="P",
+        help="control this fraction of all vehicles, chosen by a seeded hash of their ids (0..1)",
+    )
+    which.add_argument(
+        "--controlled-type",
+        metavar="T",
+        help="control every vehicle of vType T, or of the members of vTypeDistribution T "
+        "(default: vTypes with blendtrack.controlled=true)",
+    )
+    if ids:
+        which.add_argument(
+            "--controlled-ids", metavar="IDS", action="append", help="control these vehicle ids (comma-separated, repeatable)"
+        )
+    parser.add_argument(
+        "--alpha",
+        type=_alpha_value,
+        metavar="A",
+        help="blend factor for every controlled vehicle (0 = rear axle, 1 = front axle), or 'auto' (chosen every step "
+        "from direction, speed, curvature ahead and errors)",
+    )
+    parser.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
+    _add_driving_options(parser)
+
+
+def _add_output_options(parser: argparse.ArgumentParser, sumo_args_where: str) -> None:
+    """SUMO's own options, the progress bar and the output folder."""
+    parser.add_argument(
+        "--sumo-args",
+        type=_sumo_args,
+        default=(),
+        metavar="'OPTS'",
+        help=f"extra options for SUMO itself, one quoted string, {sumo_args_where}; an option SUMO does not know is a "
+        "one-line error",
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
 
 
 def _add_driving_options(parser: argparse.ArgumentParser) -> None:
@@ -438,35 +487,16 @@ def _add_compare_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> N
             "and the runs in DIR/runs/. Ctrl-C leaves no report."
         ),
     )
-    cmp.add_argument("scenario", metavar="SCENARIO", help="scenario name or folder, or a SUMO configuration file (.sumocfg, .cfg, .xml)")
+    _add_scenario_options(cmp, ids=False)
     cmp.add_argument(
         "--baseline",
         choices=("krauss", "idm", "eidm", "acc"),
         default="krauss",
         help="car-following model of every vType in both runs: krauss = as in the scenario (default), or IDM, EIDM, ACC",
     )
-    which = cmp.add_mutually_exclusive_group()
-    which.add_argument(
-        "--controlled-fraction",
-        type=_finite("fraction", 0.0, high=1.0),
-        metavar="P",
-        help="control this fraction of all vehicles, chosen by a seeded hash of their ids (0..1)",
-    )
-    which.add_argument("--controlled-type", metavar="T", help="control every vehicle of vType T (default: vTypes with blendtrack.controlled=true)")
-    cmp.add_argument("--alpha", type=_alpha_value, metavar="A", help="blend factor for every controlled vehicle, or 'auto' (chosen every step)")
-    cmp.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
-    _add_driving_options(cmp)
     cmp.add_argument("--seeds", type=_seeds, default=3, metavar="N", help="run seeds 0..N-1 (default 3)")
     cmp.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
-    cmp.add_argument(
-        "--sumo-args",
-        type=_sumo_args,
-        default=(),
-        metavar="'OPTS'",
-        help="extra options for SUMO itself in both runs of every pair, one quoted string (as for sumo run)",
-    )
-    cmp.add_argument("--quiet", action="store_true", help="no progress bar")
-    cmp.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
+    _add_output_options(cmp, "in both runs of every pair")
     cmp.set_defaults(run=_cmd_compare)
 
 
@@ -520,22 +550,6 @@ def _raise_interrupt(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
-def _positive_int(what: str, high: int | None = None):  # type: ignore[no-untyped-def]
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"{what} must be a whole number, got {text!r}") from None
-        if value < 1:
-            raise argparse.ArgumentTypeError(f"{what} must be >= 1, got {text}")
-        if high is not None and value > high:
-            raise argparse.ArgumentTypeError(f"{what} must be <= {high}, got {text}")
-        return value
-
-    parse.__name__ = what
-    return parse
-
-
 def _add_batch_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None:
     b = subcommands.add_parser(
         "batch",
@@ -555,13 +569,13 @@ def _add_batch_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> Non
     where = b.add_mutually_exclusive_group()
     where.add_argument(
         "--workers",
-        type=_positive_int("workers", high=256),
+        type=_whole("workers", high=256),
         metavar="N",
         help="local worker processes, one run each at a time (<= 256; default: the number of cores)",
     )
     where.add_argument(
         "--dask-local",
-        type=_positive_int("dask-local", high=256),
+        type=_whole("dask-local", high=256),
         metavar="N",
         help="start a Dask LocalCluster of N (<= 256) single-threaded worker processes and run there",
     )
@@ -601,7 +615,7 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
         "run",
         help="run a scenario with blendtrack driving the selected vehicles",
         description=(
-            "Runs SCENARIO (a folder of sumo_scenarios/ by name or path, or any .sumocfg) with the selected "
+            "Runs SCENARIO (a folder of sumo_scenarios/ by name or path, or any SUMO configuration) with the selected "
             "vehicles driven by blendtrack along their lanes and everybody else on SUMO's own models. Writes "
             "OUT/vehicles.csv (one row per controlled vehicle), OUT/summary.json, the plots "
             "lateral_error_hist.png, speed_vs_curvature.png and trajectory.png, SUMO's tripinfo (with "
@@ -611,21 +625,7 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
             "[controller] or [vehicle] key for that type."
         ),
     )
-    run.add_argument("scenario", metavar="SCENARIO", help="scenario name or folder, or a SUMO configuration file (.sumocfg, .cfg, .xml)")
-    which = run.add_mutually_exclusive_group()
-    which.add_argument(
-        "--controlled-fraction",
-        type=_finite("fraction", 0.0, high=1.0),
-        metavar="P",
-        help="control this fraction of all vehicles, chosen by a seeded hash of their ids (0..1)",
-    )
-    which.add_argument("--controlled-type", metavar="T", help="control every vehicle of vType T")
-    which.add_argument(
-        "--controlled-ids", metavar="IDS", action="append", help="control these vehicle ids (comma-separated, repeatable)"
-    )
-    run.add_argument("--alpha", type=_alpha_value, metavar="A", help="blend factor for every controlled vehicle (0 = rear axle, 1 = front axle), or 'auto' (chosen every step from direction, speed, curvature ahead and errors)")
-    run.add_argument("--config", metavar="FILE.toml", help="[controller] and [vehicle] parameters (paper names)")
-    _add_driving_options(run)
+    _add_scenario_options(run, ids=True)
     run.add_argument("--end", type=_finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
     run.add_argument("--seed", type=_seed, default=0, metavar="N", help="seed of SUMO and of the vehicle selection (default 0)")
     run.add_argument("--gui", action="store_true", help="show the run in sumo-gui (through TraCI)")
@@ -638,16 +638,7 @@ def _add_sumo_parser(subcommands: "argparse._SubParsersAction[_Parser]") -> None
     run.add_argument("--trace", action="store_true", help="also write OUT/trace.csv, one row per controlled vehicle and step")
     run.add_argument("--fcd", action="store_true", help="also write SUMO's floating car data to OUT/sumo/fcd.xml")
     run.add_argument("--ssm", action="store_true", help="also write SUMO's SSM conflicts (TTC, DRAC, PET) to OUT/sumo/ssm.xml")
-    run.add_argument(
-        "--sumo-args",
-        type=_sumo_args,
-        default=(),
-        metavar="'OPTS'",
-        help="extra options for SUMO itself, one quoted string, e.g. --sumo-args '--scale 2' (demand x2); "
-        "an option SUMO does not know is a one-line error",
-    )
-    run.add_argument("--quiet", action="store_true", help="no progress bar")
-    run.add_argument("--out", required=True, metavar="DIR", help="output directory (created if missing)")
+    _add_output_options(run, "(e.g. --sumo-args '--scale 2': demand x2)")
     run.set_defaults(run=_cmd_sumo_run)
 
 
