@@ -98,7 +98,7 @@ pub struct ControllerConfig {
     pub ray_horizon_m: f64,
     /// The hardest braking (m/s^2, < 0) the vehicle may use when, with no
     /// plan (U < 0), braking at `max_obs_deceleration` would not stop it
-    /// before a real obstacle's stopping point: it then brakes as hard as
+    /// before a vehicle ahead's stopping point: it then brakes as hard as
     /// stopping there needs, down to this (never gentler than b_l). A
     /// passenger car's emergency braking is about 9 m/s^2.
     pub emergency_deceleration: f64,

@@ -585,7 +585,7 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
     }
     let stop = opt(inp.stop_gap_m);
     if stop.is_finite() {
-        obstacles[n_obs] = Obstacle::new(stop, 0.0);
+        obstacles[n_obs] = Obstacle::line(stop);
         n_obs += 1;
     }
     let limit = opt(inp.speed_limit_mps);

@@ -55,6 +55,10 @@ pub struct Obstacle {
     /// it is bounded below by `max_deceleration`, as for the virtual
     /// obstacle, and never reaches the emergency `max_obs_deceleration`.
     pub soft: bool,
+    /// A vehicle (or anything a collision is with), as opposed to a line to
+    /// stop at: only for a vehicle does braking without a plan go past b_l
+    /// toward `emergency_deceleration` (overshooting a line is not a collision).
+    pub vehicle: bool,
 }
 
 impl Obstacle {
@@ -64,6 +68,18 @@ impl Obstacle {
             gap_m,
             speed_mps,
             soft: false,
+            vehicle: true,
+        }
+    }
+
+    /// A line to stop at (a stop line, a lane's end): standing, and braked
+    /// for at `max_obs_deceleration` at most when there is no plan.
+    pub fn line(gap_m: f64) -> Self {
+        Obstacle {
+            gap_m,
+            speed_mps: 0.0,
+            soft: false,
+            vehicle: false,
         }
     }
 
@@ -73,6 +89,7 @@ impl Obstacle {
             gap_m,
             speed_mps,
             soft: true,
+            vehicle: true,
         }
     }
 }
@@ -170,8 +187,9 @@ pub fn longitudinal_accel(
 ) -> LongitudinalOutput {
     let free = free_flow_accel(speed_abs, cfg);
     // Without a plan: b_l, or harder when b_l can no longer stop the
-    // vehicle before a real obstacle (the virtual and soft ones cap it below).
-    let law = |gap: f64, vl: f64| {
+    // vehicle before a vehicle ahead (the virtual and soft ones cap it below;
+    // a line to stop at keeps b_l).
+    let law = |gap: f64, vl: f64, vehicle: bool| {
         let vl = vl.max(0.0);
         stopping_plan(
             speed_abs,
@@ -183,6 +201,9 @@ pub fn longitudinal_accel(
             cfg.max_obs_deceleration,
         )
         .unwrap_or_else(|| {
+            if !vehicle {
+                return cfg.max_obs_deceleration;
+            }
             emergency_accel(
                 speed_abs,
                 gap,
@@ -195,12 +216,12 @@ pub fn longitudinal_accel(
     // A curve is not an emergency: braking for the virtual obstacle stops at
     // the planning deceleration b_f; only real obstacles may demand b_l.
     let virt = d_obs
-        .map(|d| law(d, 0.0).max(cfg.max_deceleration))
+        .map(|d| law(d, 0.0, false).max(cfg.max_deceleration))
         .unwrap_or(f64::INFINITY);
     let mut a = free.min(virt);
     for o in obstacles {
         let r = if o.gap_m.is_finite() && o.speed_mps.is_finite() {
-            law(o.gap_m, o.speed_mps)
+            law(o.gap_m, o.speed_mps, o.vehicle)
         } else if o.gap_m.is_nan() || o.speed_mps.is_nan() {
             // An obstacle we cannot read is treated as a wall right here.
             cfg.max_obs_deceleration
@@ -710,6 +731,9 @@ mod tests {
         assert_eq!(virt.accel_mps2, -4.0);
         let soft = longitudinal_accel(10.0, None, &[Obstacle::soft(6.0, 0.0)], &cfg);
         assert_eq!(soft.accel_mps2, -4.0);
+        // A line to stop at (a stop line, a lane's end) keeps b_l without a plan.
+        let line = longitudinal_accel(10.0, None, &[Obstacle::line(6.0)], &cfg);
+        assert_eq!(line.accel_mps2, -4.0);
         // With a plan nothing changes: the law's value.
         let far = longitudinal_accel(20.0, None, &[Obstacle::new(120.0, 0.0)], &cfg);
         assert_eq!(
