@@ -216,32 +216,14 @@ def test_a_distribution_selects_its_members_and_unknown_params_are_named(tmp_pat
 
 
 @needs_real
-def test_sumo_run_on_the_eccles_cfg_leaves_the_public_folder_untouched(tmp_path: Path) -> None:
-    sc = resolve_scenario(REAL / "eccles_interchange" / "interchangeSim.cfg")
+@pytest.mark.parametrize(
+    "spec, own_output",
+    [("eccles_interchange/interchangeSim.cfg", "data/vehicle_routes.xml"), ("bologna_acosta/run.sumocfg", "e1_output.xml")],
+)
+def test_sumo_run_on_the_public_scenarios_leaves_their_folders_untouched(tmp_path: Path, spec: str, own_output: str) -> None:
+    sc = resolve_scenario(REAL / spec)
     before = _tree_hash(sc.folder)
     proc = _cli("sumo", "run", str(sc.sumocfg), "--controlled-fraction", "0.3", "--end", "30", "--quiet", "--out", str(tmp_path / "o"))
     assert proc.returncode == 0, proc.stderr
     assert _tree_hash(sc.folder) == before
-    assert (tmp_path / "o" / "sumo" / "data" / "vehicle_routes.xml").is_file()  # its own output, under --out
-
-
-def test_compare_baselines_rewrite_vtypes_wherever_they_are_defined(tmp_path: Path) -> None:
-    from blendtrack.sumo.compare import with_model
-    from blendtrack.sumo.sumocfg import read_xml
-
-    d = _scenario_folder(tmp_path, gz=True)
-    (d / "run.cfg").write_text(_config(_inputs(gz=True)))
-    sc = resolve_scenario(d)
-    model = with_model(sc, "idm", tmp_path / "model")
-    cf = {vt.get("id"): vt.get("carFollowModel") for f in [*model.route_files, *model.additional_files] for vt in read_xml(f).iter("vType")}
-    assert cf == {"auto": "IDM", "human": "IDM", "calm": "IDM", "brisk": "IDM"}
-    assert resolve_scenario(model.sumocfg).vtypes().members("mix") == ["calm", "brisk"]
-    # The same scenario through the CLI, gzipped routes and SUMO options included.
-    out = tmp_path / "cmp"
-    proc = _cli("compare", str(d), "--baseline", "idm", "--seeds", "1", "--end", "10", "--sumo-args", "--step-length 0.2", "--quiet", "--out", str(out))
-    assert proc.returncode == 0, proc.stderr
-    assert (out / "report.md").is_file()
-    for run in ("baseline", "treatment"):
-        log = (out / "runs" / "seed0" / run / "sumo" / "tripinfo.xml")
-        assert log.is_file(), run
-    _one_line_error(_cli("compare", str(d), "--controlled-type", "brisk", "--seeds", "1", "--out", str(out)), "no vehicle of scn is of that type")
+    assert (tmp_path / "o" / "sumo" / own_output).is_file()  # its own configured output, under --out
