@@ -7,7 +7,8 @@ use crate::placement::{choose_move, Motion, Move};
 use crate::plan::Plan;
 use crate::signal::{signal_at, Signal};
 use crate::substep::{
-    advance, control_record, held_speed, past_route_end, state_at, substeps, HeldGaps, LastStep,
+    advance, control_record, held_speed, past_route_end, state_at, stepped_finite, substeps,
+    HeldGaps, LastStep,
 };
 use crate::{Driven, RouteFleet, TrafficError};
 use blendtrack::path::wrap_angle;
@@ -225,16 +226,7 @@ impl RouteFleet {
             .as_mut()
             .expect("planned slots are driven");
         let state = state_at(next, i);
-        let finite = [
-            state.x_m,
-            state.y_m,
-            state.theta_rad,
-            state.v_mps,
-            state.delta_rad,
-            out.s_rear_m[i],
-        ]
-        .iter()
-        .all(|x| x.is_finite());
+        let finite = stepped_finite(&state, out.s_rear_m[i]);
         let (v, th) = (state.v_mps, state.theta_rad);
         let reach = d.body.reach_m;
         let (xf, yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());

@@ -192,16 +192,7 @@ impl RouteFleet {
         state: &VehicleState,
         h: f64,
     ) -> Result<(), TrafficError> {
-        let finite = [
-            state.x_m,
-            state.y_m,
-            state.theta_rad,
-            state.v_mps,
-            state.delta_rad,
-            out.s_rear_m[i],
-        ]
-        .iter()
-        .all(|x| x.is_finite());
+        let finite = stepped_finite(state, out.s_rear_m[i]);
         if !(out.ok[i] && finite) {
             return Ok(());
         }
@@ -220,6 +211,21 @@ impl RouteFleet {
         }
         Ok(())
     }
+}
+
+/// Whether a stepped vehicle's state and its foot point on the track are
+/// all finite (else the step is not used).
+pub(crate) fn stepped_finite(state: &VehicleState, s_rear_m: f64) -> bool {
+    [
+        state.x_m,
+        state.y_m,
+        state.theta_rad,
+        state.v_mps,
+        state.delta_rad,
+        s_rear_m,
+    ]
+    .iter()
+    .all(|x| x.is_finite())
 }
 
 #[cfg(test)]
