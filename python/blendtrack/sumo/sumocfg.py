@@ -21,6 +21,7 @@ import gzip
 import os
 import xml.etree.ElementTree as ET
 from pathlib import Path
+from typing import IO
 
 from blendtrack import BlendtrackError
 
@@ -49,16 +50,19 @@ _OUTPUT_ATTRIBUTES = ("file", "output", "dest")
 _XSI = "{http://www.w3.org/2001/XMLSchema-instance}"
 
 
+def _open(file: Path) -> IO[bytes]:
+    """``file`` for reading, gunzipped when its content is gzip (as SUMO decides)."""
+    with open(file, "rb") as f:
+        gz = f.read(2) == b"\x1f\x8b"
+    return gzip.open(file, "rb") if gz else open(file, "rb")  # type: ignore[return-value]
+
+
 def read_xml(file: Path) -> ET.Element:
     """The root element of a SUMO XML file, gzipped or plain; a
     :class:`ScenarioError` naming the file when it cannot be read."""
     try:
-        with open(file, "rb") as f:
-            gz = f.read(2) == b"\x1f\x8b"
-        if gz:
-            with gzip.open(file, "rb") as g:
-                return ET.parse(g).getroot()
-        return ET.parse(file).getroot()
+        with _open(file) as stream:
+            return ET.parse(stream).getroot()
     except ET.ParseError as e:
         raise ScenarioError(f"{file}: malformed XML: {e}") from None
     except (OSError, EOFError) as e:
@@ -70,10 +74,7 @@ def iter_xml(file: Path, tags: set[str]) -> "list[ET.Element]":
     read incrementally so large route files stay cheap."""
     found: list[ET.Element] = []
     try:
-        with open(file, "rb") as f:
-            gz = f.read(2) == b"\x1f\x8b"
-        opener = gzip.open if gz else open
-        with opener(file, "rb") as stream:
+        with _open(file) as stream:
             depth_keep = 0
             for event, el in ET.iterparse(stream, events=("start", "end")):
                 if event == "start":
@@ -96,10 +97,7 @@ def is_config(file: Path) -> bool:
     """Whether ``file`` is a SUMO configuration, by its root element (read
     alone: a large network file is not parsed for this)."""
     try:
-        with open(file, "rb") as f:
-            gz = f.read(2) == b"\x1f\x8b"
-        opener = gzip.open if gz else open
-        with opener(file, "rb") as stream:
+        with _open(file) as stream:
             for _, el in ET.iterparse(stream, events=("start",)):
                 return el.tag in CONFIG_ROOTS
     except (ET.ParseError, OSError, EOFError):
