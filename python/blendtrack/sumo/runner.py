@@ -426,6 +426,8 @@ class SumoRun:
                     failed.append(i)
         self.moves["speed"] += len(speed_idx)
         self.moves["none"] += int(np.count_nonzero(moves == _HOLD))
+        if self.stops.pending:
+            self.stops.keep_speeds(ids, np.flatnonzero(moves == _HOLD).tolist(), speeds)
         lane_names = self.tracks.lanes.names
         idx = np.flatnonzero(moves == _LANE)
         for i, lane, pos, sp in zip(idx.tolist(), out["lane"][idx].tolist(), out["lane_pos_m"][idx].tolist(), speeds[idx].tolist()):

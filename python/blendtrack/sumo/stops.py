@@ -32,6 +32,14 @@ SUMO does not hold the vehicle for it at the end of a lane:
 - ``not_started``: the vehicle stood at the halt for ``START_WAIT_STEPS``
   steps and SUMO did not start the stop.
 
+SUMO 1.28 keeps a ``setSpeed`` of a vehicle that has stops ahead for one
+step only: from the next step on its own model drives it again (from a
+standstill at its own acceleration, past the speed limit under speed mode
+0), while blendtrack's vehicle stands. The RouteFleet sends nothing for a
+vehicle that keeps its speed (a standing one, ``Move.Hold``), relying on
+SUMO keeping the last command, as it does for a vehicle without stops; so
+for a vehicle with stops the speed is sent again every step.
+
 A stop SUMO drops by itself (a teleport skips it) counts as ``sumo``.
 A route that passes the stop's lane twice: the stop is placed at the first
 pass at or after where the front is (SUMO's stop data carry no route index).
@@ -129,6 +137,15 @@ class Stops:
 
     def drop(self, vid: str) -> None:
         self.pending.pop(vid, None)
+
+    def keep_speeds(self, ids: list[str], held: list[int], speeds: Any) -> None:
+        """Sends again the speed of each vehicle with stops that the step
+        moved without a SUMO call (indices ``held`` into ``ids``): SUMO keeps
+        such a vehicle's speed command for one step only (see the module docs)."""
+        pending, set_speed = self.pending, self.conn.set_speed
+        for i in held:
+            if ids[i] in pending:
+                set_speed(ids[i], float(speeds[i]))
 
     def update(self) -> None:
         """Each vehicle's halt for this step, from SUMO's word on its stops:
