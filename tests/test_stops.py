@@ -38,9 +38,11 @@ EDGES = """<edges>
 </edges>"""
 ADDITIONAL = """<additional>
   <busStop id="bs" lane="AB_0" startPos="150" endPos="170"/>
+  <parkingArea id="pa" lane="BC_1" startPos="100" endPos="140" roadsideCapacity="3"/>
 </additional>"""
 # "bus": the bus stop (10 s), a lane stop (5 s) and one until t = 90 s.
 # "car": no stops. "odd": a stop on the lane beside its track (skipped).
+# "park": a parking area (8 s). "trig": a stop waiting for a person who never comes.
 ROUTES = """<routes>
   <vType id="bus" vClass="bus" length="12" minGap="3" accel="2.6" decel="4.5" sigma="0"/>
   <vType id="car" length="5" minGap="2.5" accel="2.6" decel="4.5" sigma="0"/>
@@ -54,6 +56,14 @@ ROUTES = """<routes>
   <vehicle id="{prefix}odd" type="car" depart="8" departLane="1" departSpeed="max">
     <route edges="AB BC"/>
     <stop lane="AB_0" endPos="200" duration="5"/>
+  </vehicle>
+  <vehicle id="{prefix}park" type="car" depart="12" departLane="1" departSpeed="max">
+    <route edges="AB BC"/>
+    <stop parkingArea="pa" duration="8"/>
+  </vehicle>
+  <vehicle id="{prefix}trig" type="car" depart="20" departLane="1" departSpeed="max">
+    <route edges="AB BC"/>
+    <stop lane="AB_1" endPos="250" triggered="person" duration="3"/>
   </vehicle>
 </routes>"""
 
@@ -128,7 +138,7 @@ def test_a_controlled_bus_serves_its_stops_where_and_as_long_as_sumo_says(runs: 
     assert (bus["stops_served"], bus["stops_skipped"], bus["end_reason"]) == ("3", "0", "arrived")
     assert int(bus["collisions"]) == 0 and int(bus["teleports"]) == 0
     summary = json.loads((ctrl / "summary.json").read_text())
-    assert summary["stops_served"] == 3 and summary["stops_skipped"] == 1
+    assert summary["stops_served"] == 3 + 1 and summary["stops_skipped"] == 1
     assert summary["collisions"] == 0
 
 
@@ -165,3 +175,23 @@ def test_a_vehicle_without_stops_is_never_looked_at_again(tmp_path: Path, monkey
     assert rec.vid == "car" and rec.reason == "arrived"
     assert (rec.stops_served, rec.stops_skipped) == (0, 0)
     assert calls == [] and not run.stops.pending
+
+
+def test_a_parking_area_is_served_and_an_unmet_trigger_holds_as_in_sumo(runs: tuple[Path, Path]) -> None:
+    ctrl, plain = runs
+    mine, sumos = _stopinfos(ctrl / "stopout.xml"), _stopinfos(plain / "stopout.xml")
+    (park,) = mine["park"]
+    assert (park["lane"], park.get("parkingArea"), park["parking"]) == ("BC_1", "pa", "1")
+    # SUMO's own driver halts at the lot it picks inside the area; the
+    # controlled one at the area's end, which SUMO accepts as well.
+    assert 100.0 <= float(park["pos"]) <= 140.0 + PAST_END_M
+    assert abs(float(park["ended"]) - float(park["started"]) - 8.0) <= DT
+    rows = _vehicles(ctrl)
+    assert (rows["park"]["stops_served"], rows["park"]["end_reason"]) == ("1", "arrived")
+    # Nobody boards "trig": SUMO holds it at its stop for good, its own driver
+    # as well as the controlled one (no stop ends, neither arrives).
+    assert "trig" not in mine and "trig" not in sumos
+    trig = rows["trig"]
+    assert (trig["end_reason"], trig["stops_served"], trig["stops_skipped"]) == ("end", "0", "0")
+    arrived = {t.get("id") for t in ET.parse(ctrl / "sumo" / "tripinfo.xml").getroot().iter("tripinfo")}
+    assert "trig" not in arrived and {"bus", "car", "odd", "park"} <= arrived
