@@ -100,13 +100,13 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """The same road run twice: every vehicle controlled, then none (SUMO's own drivers)."""
     base = tmp_path_factory.mktemp("stops")
     outs = []
-    for name, opts in (("ctrl", {"controlled_fraction": 1.0}), ("plain", {"controlled_fraction": 0.0})):
+    for name, fraction in (("ctrl", 1.0), ("plain", 0.0)):
         cfg = _scenario(base / f"sc_{name}", "")
         out = base / name
         stop_out = out / "stopout.xml"
         out.mkdir()
         sc = sumo.resolve_scenario(str(cfg))
-        run_opts = RunOptions(end_s=200, progress=False, sumo_args=("--stop-output", str(stop_out)), **opts)
+        run_opts = RunOptions(end_s=200, progress=False, sumo_args=("--stop-output", str(stop_out)), controlled_fraction=fraction)
         sumo.run_scenario(sc, run_opts, out)
         outs.append(out)
     return outs[0], outs[1]

@@ -149,7 +149,10 @@ mod tests {
             .unwrap() as i64;
         f.set_halt(a, 120.0).unwrap();
         let (sf, _) = run_to_rest(&mut f, a, 3000);
-        assert!((120.0..=120.0 + HALT_CREEP_M).contains(&sf), "halt first: {sf}");
+        assert!(
+            (120.0..=120.0 + HALT_CREEP_M).contains(&sf),
+            "halt first: {sf}"
+        );
         f.set_halt(a, 300.0).unwrap();
         let (sf, _) = run_to_rest(&mut f, a, 3000);
         assert!(sf < 200.0, "red line first: {sf}");
