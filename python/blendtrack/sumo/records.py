@@ -45,6 +45,10 @@ class VehicleRecord:
     reverse_warnings: int = 0
     time_above_comfort_s: float = 0.0
     lane_changes: int = 0
+    #: SUMO stops served, and skipped with their reasons (";"-joined; see blendtrack.sumo.stops).
+    stops_served: int = 0
+    stops_skipped: int = 0
+    stop_skip_reasons: str = ""
 
 
 class SampleHistograms:

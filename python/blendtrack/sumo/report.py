@@ -47,6 +47,9 @@ EXTRA_COLUMNS = (
     "reverse_warnings",
     "time_above_comfort_s",
     "lane_changes",
+    "stops_served",
+    "stops_skipped",
+    "stop_skip_reasons",
 )
 
 
@@ -78,6 +81,9 @@ def vehicle_row(r: VehicleRecord) -> dict[str, Any]:
         "reverse_warnings": r.reverse_warnings,
         "time_above_comfort_s": r.time_above_comfort_s,
         "lane_changes": r.lane_changes,
+        "stops_served": r.stops_served,
+        "stops_skipped": r.stops_skipped,
+        "stop_skip_reasons": r.stop_skip_reasons,
     }
 
 

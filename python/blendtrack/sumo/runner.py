@@ -67,6 +67,7 @@ from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.records import RunResult, SampleHistograms, Trace, VehicleRecord
 from blendtrack.sumo.scenario import Scenario
 from blendtrack.sumo.selection import Selection, parse_ids
+from blendtrack.sumo.stops import Stops
 from blendtrack.sumo.tracks import Active, Tracks
 from blendtrack.sumo.vehicles import LEADER_RANGE_M, Controlled
 
@@ -124,6 +125,7 @@ class SumoRun:
         self.histograms = SampleHistograms()
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel)
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel)
+        self.stops = Stops(self.conn, self.fleet, self.network)
         self.trace = Trace()
         self._seen: set[str] = set()
         self._background: set[str] = set()
@@ -149,6 +151,7 @@ class SumoRun:
         """``vid`` is no longer controlled (see ``Controlled.drop``)."""
         self.vehicles.drop(vid, t, reason)
         self.lanes.drop(vid)
+        self.stops.drop(vid)
 
     def _rebuild(self, act: Active) -> None:
         """The route changed (rerouting): a new track from where the vehicle is."""
@@ -209,6 +212,7 @@ class SumoRun:
             "courtesy_steps": lanes["courtesy_steps"],
             "merge_lead_steps": lanes["merge_lead_steps"],
             "tactical_lane_changes": lanes["tactical_lane_changes"],
+            **self.stops.counts,
         }
 
     def _loop(self, end: float | None) -> int:
@@ -272,6 +276,8 @@ class SumoRun:
             if self.selection.is_selected(vid, vtype, len(self.records)):
                 try:
                     self.vehicles.take_over(vid, t)
+                    if vid in self.active:
+                        self.stops.take_over(self.active[vid])
                 except blendtrack.PathError:
                     # An undrivable route: leave it to SUMO, and say so.
                     self.counts["takeover_failures"] += 1
@@ -294,6 +300,8 @@ class SumoRun:
         soft = self.lanes.soft_leaders(self.vehicles.index) if self.lanes.has_soft_leaders() else None
         if not self.vehicles.ids:
             return
+        if self.stops.pending:
+            self.stops.update()
         ids, order, fleet = self.vehicles.ids, self.vehicles.order, self.fleet
         queries = fleet.plan_sumo(self.vehicles.slots, leaders, self.conn.get_speed, read, lanes, poss, asked, soft).tolist()
         must_yield = self.junctions.must_yield
@@ -418,6 +426,8 @@ class SumoRun:
                     failed.append(i)
         self.moves["speed"] += len(speed_idx)
         self.moves["none"] += int(np.count_nonzero(moves == _HOLD))
+        if self.stops.pending:
+            self.stops.keep_speeds(ids, np.flatnonzero(moves == _HOLD).tolist(), speeds)
         lane_names = self.tracks.lanes.names
         idx = np.flatnonzero(moves == _LANE)
         for i, lane, pos, sp in zip(idx.tolist(), out["lane"][idx].tolist(), out["lane_pos_m"][idx].tolist(), speeds[idx].tolist()):

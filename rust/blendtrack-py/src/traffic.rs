@@ -349,6 +349,18 @@ impl RouteFleet {
         Ok((s.x_m, s.y_m, s.theta_rad, s.v_mps, s.delta_rad))
     }
 
+    /// Sets where on its track (arc length, m) the vehicle's front is to
+    /// stop, a standing obstacle braked for like a red line; NaN clears it.
+    /// The front rests up to ``HALT_CREEP_M`` past it. A retrack clears it.
+    fn set_halt(&mut self, slot: i64, s_m: f64) -> PyResult<()> {
+        self.inner.set_halt(slot, s_m).map_err(traffic_error)
+    }
+
+    /// The vehicle's halt (arc length, m), NaN when none.
+    fn halt(&self, slot: i64) -> PyResult<f64> {
+        self.inner.halt(slot).map_err(traffic_error)
+    }
+
     /// Arc length of the vehicle's front bumper on its track (m).
     fn s_front(&self, slot: i64) -> PyResult<f64> {
         self.inner.s_front(slot).map_err(traffic_error)

@@ -82,6 +82,7 @@ mod route;
 mod signal;
 mod stats;
 mod step;
+mod stops;
 mod substep;
 #[cfg(test)]
 mod testkit;
@@ -93,6 +94,7 @@ pub use route::{LaneChangeDue, Piece, Route, StopLine};
 pub use signal::Signal;
 pub use stats::DriveStats;
 pub use step::RouteOutputs;
+pub use stops::HALT_CREEP_M;
 
 use blendtrack::{ControllerConfig, Fleet, Path, VehicleParams, VehicleState};
 use error::check_len;
@@ -190,6 +192,9 @@ struct Driven {
     known: Option<(u32, f64)>,
     /// The speed last sent to the simulator (NaN before the first).
     sumo_speed: f64,
+    /// Arc length where the caller wants the front to stop (a SUMO
+    /// `<stop>`), NaN when none; see [`RouteFleet::set_halt`].
+    halt_m: f64,
     /// Simulator steps the vehicle was moved in (its statistics count
     /// control steps, more than these when a step is sub-stepped).
     steps: u64,
@@ -357,6 +362,7 @@ impl RouteFleet {
             holding: None,
             known: None,
             sumo_speed: f64::NAN,
+            halt_m: f64::NAN,
             steps: 0,
             stats: DriveStats::default(),
         });
@@ -371,7 +377,7 @@ impl RouteFleet {
     }
 
     /// Moves a vehicle to another track (a lane change, a new route); its
-    /// state and statistics stay, its stop lines start over.
+    /// state and statistics stay, its stop lines start over, its halt goes.
     pub fn retrack(&mut self, slot: i64, track_id: i64) -> Result<(), TrafficError> {
         let route = self.route_of_track(track_id)?;
         let d = self.driven(slot)?;
@@ -384,6 +390,7 @@ impl RouteFleet {
         d.next_stop = 0;
         d.yellow = None;
         d.holding = None;
+        d.halt_m = f64::NAN;
         self.plan = None;
         Ok(())
     }

@@ -5,6 +5,7 @@
 use crate::error::check_len;
 use crate::route::Route;
 use crate::signal::{signal_at, Signal};
+use crate::stops::{halt_gap, nearer};
 use crate::{Driven, RouteFleet, TrafficError, TrafficSettings};
 use blendtrack::longitudinal::stopping_accel;
 use blendtrack::{ControllerConfig, FleetError};
@@ -180,6 +181,9 @@ impl RouteFleet {
             } else {
                 dec.stop_gap.min(end_gap)
             };
+        }
+        if d.halt_m.is_finite() {
+            dec.stop_gap = nearer(dec.stop_gap, halt_gap(d, cfg));
         }
         plan.stop_gap[i] = dec.stop_gap;
         let lane = obs.lane[i];

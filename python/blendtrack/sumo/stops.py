@@ -1,0 +1,230 @@
+"""Stops (SUMO's ``<stop>``) of controlled vehicles: at bus stops, container
+stops, charging stations, parking areas and lane positions.
+
+A controlled vehicle drives with speed mode 0, so SUMO's own driver no
+longer brakes for its stops: left alone, SUMO halts it with an emergency
+stop at the end of the stop's lane ("no connection to the next edge") and
+serves the stop there, or, once blendtrack moves it on, aborts or skips it.
+Here each controlled vehicle's next stop is a *halt* of the RouteFleet: a
+standing obstacle on its track, braked for at the planning deceleration
+like a red stop line, placed so that the front comes to rest at the stop's
+end position (SUMO's convention for where a stopped vehicle's front is).
+
+The dwell is SUMO's. SUMO starts a stop once the vehicle is on the stop's
+lane, at or past the stop's start (a lane stop's start is 0.2 m before its
+end unless given; a stopping place's is 0.5 m before the free end) and at
+most 0.1 m/s; that holds for a vehicle on speed mode 0 whose speed blendtrack
+sets (checked on SUMO 1.28: ``isStopped``, ``getStopState`` and the
+stop-output agree), and SUMO then holds it at standstill whatever speed is
+set, for ``duration``, until ``until``, or until its person or container
+trigger is met, exactly as for its own drivers (a trigger that is never met
+holds the vehicle for good, as in SUMO). While SUMO says the vehicle is
+stopped the halt stays; once SUMO ends the stop the halt goes, the stop
+counts as served, and the vehicle drives on to the next one.
+
+A stop the vehicle cannot serve is skipped, counted with its reason, and
+removed from SUMO's schedule (``replaceStop`` with an empty edge), so that
+SUMO does not hold the vehicle for it at the end of a lane:
+
+- ``off_track``: the stop's lane is not on the vehicle's track ahead (another
+  lane of the edge: blendtrack changes lanes only where the route needs it);
+- ``passed``: the front is already past the stop (taken over beyond it);
+- ``not_started``: the vehicle stood at the halt for ``START_WAIT_STEPS``
+  steps and SUMO did not start the stop.
+
+SUMO 1.28 keeps a ``setSpeed`` of a vehicle that has stops ahead for one
+step only: from the next step on its own model drives it again (from a
+standstill at its own acceleration, past the speed limit under speed mode
+0), while blendtrack's vehicle stands. The RouteFleet sends nothing for a
+vehicle that keeps its speed (a standing one, ``Move.Hold``), relying on
+SUMO keeping the last command, as it does for a vehicle without stops; so
+for a vehicle with stops the speed is sent again every step.
+
+A stop SUMO drops by itself (a teleport skips it) counts as ``sumo``.
+A route that passes the stop's lane twice: the stop is placed at the first
+pass at or after where the front is (SUMO's stop data carry no route index).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from blendtrack import RouteFleet
+from blendtrack.sumo.connection import SumoConnection
+from blendtrack.sumo.geometry import RouteGeometry
+from blendtrack.sumo.network import Network
+from blendtrack.sumo.tracks import Active
+
+#: The halt is placed this far (m) before the stop's end position: the
+#: stopping law's last creep carries the front 0.155 to 0.207 m past its
+#: obstacle (measured in the traffic engine's tests, 3 to 19 m/s, control
+#: steps 0.05 and 0.1 s), so the front rests within about 0.05 m of the end
+#: position, well within SUMO's 0.2 m (lane stop) or 0.5 m (stopping place).
+AIM_SHORT_M = 0.2
+#: A halt is never placed closer than this (m) to the lane's end: a front
+#: resting past it would be on the next lane, where SUMO does not stop it.
+LANE_END_ROOM_M = 0.05
+#: A stop whose end position is this far (m) or more behind the front when it
+#: becomes the next one is passed.
+PASSED_M = 1.0
+#: Standing at the halt (front within ``AT_HALT_M`` of it, below
+#: ``STANDING_MPS``) this many steps without SUMO starting the stop: skipped.
+#: SUMO starts a stop in the step the vehicle comes within range at halting
+#: speed, so a few steps are plenty.
+START_WAIT_STEPS = 5
+AT_HALT_M = 0.5
+STANDING_MPS = 0.1
+
+
+def stop_key(st: Any) -> tuple[str, float, str]:
+    """What tells two of SUMO's stops apart: lane, end position, stopping place."""
+    return (st.lane, round(float(st.endPos), 3), st.stoppingPlaceID)
+
+
+def halt_on_track(geo: RouteGeometry, lane: str, end_pos: float, lane_length: float, s_from: float) -> float | None:
+    """The arc length on ``geo``'s track where the front halts for a stop at
+    ``end_pos`` on ``lane`` (``AIM_SHORT_M`` short of it, at least
+    ``LANE_END_ROOM_M`` before the lane's end): on the first piece of that
+    lane covering the position at or after ``s_from``; None where none does."""
+    pos = min(end_pos, lane_length - LANE_END_ROOM_M) - AIM_SHORT_M
+    starts = geo.piece_start_s
+    n = len(starts)
+    for k in range(n):
+        if geo.piece_lane[k] != lane:
+            continue
+        start = float(starts[k])
+        end = float(starts[k + 1]) if k + 1 < n else float(geo.length_m)
+        lp0, scale = float(geo.piece_lane_pos[k]), float(geo.piece_scale[k])
+        lp1 = lp0 + (end - start) * scale
+        if lp0 - 1e-6 <= pos <= lp1 + 1e-6:
+            s = start + (pos - lp0) / scale
+            if s >= s_from:
+                return s
+    return None
+
+
+@dataclass
+class _Pending:
+    """A controlled vehicle's next stop, as far as blendtrack is concerned."""
+
+    act: Active
+    #: The stop the halt is for (``stop_key``), and the track it was placed on.
+    key: tuple[str, float, str] | None = None
+    geo: RouteGeometry | None = None
+    #: SUMO has the vehicle stopped at it.
+    dwelling: bool = False
+    #: Steps stood at the halt without SUMO starting the stop.
+    waited: int = 0
+
+
+class Stops:
+    """The stops of the controlled vehicles that have any."""
+
+    def __init__(self, conn: SumoConnection, fleet: RouteFleet, network: Network) -> None:
+        self.conn = conn
+        self.fleet = fleet
+        self.network = network
+        #: vid -> its next stop, for the vehicles with stops left.
+        self.pending: dict[str, _Pending] = {}
+        self.counts = {"stops_served": 0, "stops_skipped": 0}
+
+    def take_over(self, act: Active) -> None:
+        """``act`` was just taken over: it is followed if SUMO has stops for it."""
+        if self.conn.sumo.vehicle.getStops(act.vid, 1):
+            self.pending[act.vid] = _Pending(act)
+
+    def drop(self, vid: str) -> None:
+        self.pending.pop(vid, None)
+
+    def keep_speeds(self, ids: list[str], held: list[int], speeds: Any) -> None:
+        """Sends again the speed of each vehicle with stops that the step
+        moved without a SUMO call (indices ``held`` into ``ids``): SUMO keeps
+        such a vehicle's speed command for one step only (see the module docs)."""
+        pending, set_speed = self.pending, self.conn.set_speed
+        for i in held:
+            if ids[i] in pending:
+                set_speed(ids[i], float(speeds[i]))
+
+    def update(self) -> None:
+        """Each vehicle's halt for this step, from SUMO's word on its stops:
+        before ``RouteFleet.plan``, after every retrack of the step."""
+        for vid, p in list(self.pending.items()):
+            self._update(vid, p)
+
+    def _update(self, vid: str, p: _Pending) -> None:
+        v = self.conn.sumo.vehicle
+        stopped = bool(v.isStopped(vid))
+        if p.dwelling and not stopped:
+            # SUMO ended the stop: served; on to the next one.
+            p.act.record.stops_served += 1
+            self.counts["stops_served"] += 1
+            p.dwelling, p.key = False, None
+            self._clear(p)
+        if stopped:
+            p.dwelling = True
+            return
+        nxt = v.getStops(vid, 1)
+        if not nxt:
+            self._clear(p)
+            del self.pending[vid]
+            return
+        st = nxt[0]
+        key = stop_key(st)
+        if p.key is not None and key != p.key:
+            # SUMO dropped the stop blendtrack was halting for (a teleport skips it).
+            self._skipped(p, "sumo")
+        # A new stop, or a new track (a retrack clears the halt: a lane
+        # change, a reroute): the halt is placed (again).
+        if key != p.key or p.geo is not p.act.geo or math.isnan(self.fleet.halt(p.act.slot)):
+            self._place(vid, p, st, key)
+        elif p.key is not None:
+            self._check_started(vid, p)
+
+    def _place(self, vid: str, p: _Pending, st: Any, key: tuple[str, float, str]) -> None:
+        """The halt for SUMO's next stop ``st`` on the vehicle's present track."""
+        slot = p.act.slot
+        sf = self.fleet.s_front(slot)
+        length = float(self.network.net().getLane(st.lane).getLength())
+        s = halt_on_track(p.act.geo, st.lane, float(st.endPos), length, sf - PASSED_M)
+        if s is None:
+            # Off the track ahead, or behind the front.
+            behind = halt_on_track(p.act.geo, st.lane, float(st.endPos), length, -math.inf)
+            self._skip(vid, p, "passed" if behind is not None else "off_track")
+            return
+        self.fleet.set_halt(slot, s)
+        p.key, p.geo, p.waited = key, p.act.geo, 0
+
+    def _check_started(self, vid: str, p: _Pending) -> None:
+        """A vehicle standing at its halt that SUMO does not stop is let go."""
+        slot = p.act.slot
+        halt = self.fleet.halt(slot)
+        v = self.fleet.state(slot)[3]
+        if abs(v) < STANDING_MPS and abs(self.fleet.s_front(slot) - halt) < AT_HALT_M:
+            p.waited += 1
+            if p.waited >= START_WAIT_STEPS:
+                self._skip(vid, p, "not_started")
+        else:
+            p.waited = 0
+
+    def _skip(self, vid: str, p: _Pending, reason: str) -> None:
+        """Skips SUMO's next stop of ``vid``: counted, removed from SUMO's schedule."""
+        self._skipped(p, reason)
+        self._clear(p)
+        p.key = None
+        try:
+            self.conn.sumo.vehicle.replaceStop(vid, 0, "")
+        except Exception:
+            # SUMO refused (the stop is already gone): nothing of it left to hold the vehicle.
+            pass
+
+    def _skipped(self, p: _Pending, reason: str) -> None:
+        rec = p.act.record
+        rec.stops_skipped += 1
+        rec.stop_skip_reasons = f"{rec.stop_skip_reasons};{reason}" if rec.stop_skip_reasons else reason
+        self.counts["stops_skipped"] += 1
+
+    def _clear(self, p: _Pending) -> None:
+        self.fleet.set_halt(p.act.slot, math.nan)
+        p.geo = None
