@@ -1,5 +1,6 @@
-"""What a SUMO run keeps: per-vehicle records (``vehicles.csv``), the run's
-result, and the per-step trace of the controlled vehicles (``trace.csv``)."""
+"""What a SUMO run keeps: per-vehicle records (``vehicles.csv``, written as
+vehicles finish), their running totals for the summary, the run's result,
+and the per-step trace of the controlled vehicles (``trace.csv``)."""
 
 from __future__ import annotations
 
@@ -47,6 +48,33 @@ class VehicleRecord:
     lane_changes: int = 0
 
 
+@dataclass
+class RecordTotals:
+    """Running sums over the records of the vehicles that finished: what the
+    summary needs of them, so a record can go (to ``vehicles.csv``) as soon
+    as its vehicle finishes."""
+
+    vehicles: int = 0
+    collisions: int = 0
+    teleports: int = 0
+    red_light_violations: int = 0
+    speed_warnings: int = 0
+    reverse_warnings: int = 0
+    #: Control steps and the sum of |lateral error| over them (a run's mean |e|).
+    steps: int = 0
+    sum_abs_e: float = 0.0
+
+    def add(self, r: VehicleRecord) -> None:
+        self.vehicles += 1
+        self.collisions += r.collisions
+        self.teleports += r.teleports
+        self.red_light_violations += r.red_light_violations
+        self.speed_warnings += r.speed_warnings
+        self.reverse_warnings += r.reverse_warnings
+        self.steps += r.steps
+        self.sum_abs_e += r.sum_abs_e
+
+
 class SampleHistograms:
     """Fixed-bin histograms of the controlled vehicles' samples, for the
     plots: |lateral error| (0.01 m bins to 2 m, the last bin holding all
@@ -79,12 +107,16 @@ class SampleHistograms:
 
 @dataclass
 class RunResult:
+    #: Every controlled vehicle's record, in the order they were taken over;
+    #: empty unless ``RunOptions.keep_records`` (``vehicles.csv`` has them all).
     records: list[VehicleRecord]
     summary: dict[str, Any]
     #: vid -> (trajectory rows (t, x, y, v, e, kappa), its reference points).
     trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     #: Histograms of the samples of (|curvature|, speed, |lateral error|) of controlled vehicles.
     histograms: SampleHistograms = field(default_factory=SampleHistograms)
+    #: Running sums over all the records (kept or not).
+    totals: RecordTotals = field(default_factory=RecordTotals)
 
 
 class Trace:
