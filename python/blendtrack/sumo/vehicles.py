@@ -95,7 +95,8 @@ class Controlled:
         self.taken += 1
         if self.opt.keep_records:
             self.records.append(rec)
-        act = Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec)
+        self.tracks.enter(track)
+        act = Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec, track=track)
         if len(self.trajectories) + len(self.tracing) < self.opt.keep_trajectories or self.opt.keep_trajectories < 0:
             act.trajectory = []
             self.tracing[vid] = act
@@ -124,6 +125,8 @@ class Controlled:
             setattr(rec, key, value)
         if act.own_track is not None:
             self.fleet.remove_route(act.own_track)
+        else:
+            self.tracks.leave(act.track)
         rec.end_s = t
         rec.reason = reason
         if act.trajectory is not None and act.trajectory:
