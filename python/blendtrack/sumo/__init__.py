@@ -98,6 +98,8 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     for name in OUTPUTS:
         (out / name).unlink(missing_ok=True)
     run = SumoRun(scenario, options, out)
+    if options.trace:
+        run.trace.stream(out / "trace.csv")
     try:
         with report.VehicleWriter(out / "vehicles.csv") as rows:
             run.vehicles.finished.append(rows.write)
@@ -109,9 +111,9 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
         raise ScenarioError(
             f"{scenario.sumocfg}: SUMO stopped the run: {first} (see {out / 'sumo' / 'sumo.log'})"
         ) from None
+    finally:
+        run.trace.close()
     _count_collisions(result, out)
-    if options.trace:
-        run.write_trace(out / "trace.csv")
     report.plot_run(result, out, scenario.comfort_lateral_accel_mps2)
     report.write_json(result.summary, out / "summary.json")
     marker.unlink()

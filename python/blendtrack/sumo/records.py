@@ -120,17 +120,37 @@ class RunResult:
 
 
 class Trace:
-    """The per-step trace of every controlled vehicle (``RunOptions.trace``)."""
+    """The per-step trace of every controlled vehicle (``RunOptions.trace``):
+    kept in memory, or written as it comes once :meth:`stream` has opened a
+    file (a long run's memory stays flat)."""
 
     def __init__(self) -> None:
         self.rows: list[tuple[Any, ...]] = []
+        self._file: Any = None
+        self._csv: Any = None
+
+    def stream(self, file: Path) -> None:
+        """Writes the rows to ``file`` from now on (the header at once), none kept."""
+        import csv
+
+        self._file = open(file, "w", newline="")
+        self._csv = csv.writer(self._file)
+        self._csv.writerow(TRACE_COLUMNS)
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = self._csv = None
 
     def add(self, t: float, ids: list[str], out: dict[str, np.ndarray], edge_names: list[str]) -> None:
         """This step's rows, from ``RouteFleet.step``'s output ``out`` (in the order of ``ids``)."""
         cols = [out[k].tolist() for k in TRACE_KEYS]
         edges = [edge_names[e] for e in out["edge"].tolist()]
-        for row in zip(ids, *cols, edges, out["lane_index"].tolist()):
-            self.rows.append((t, *row))
+        rows = [(t, *row) for row in zip(ids, *cols, edges, out["lane_index"].tolist())]
+        if self._csv is not None:
+            self._csv.writerows(rows)
+        else:
+            self.rows.extend(rows)
 
     def write(self, file: Path) -> None:
         import csv
