@@ -16,6 +16,8 @@ end, and their ratio. A benchmark measures; it asserts nothing.
     .venv/bin/python scripts/bench_memory.py out/scenarios/highway_day --ref 7200 --out out/memory_day
     # the day at a tenth of its demand (SUMO's --scale, in both runs):
     .venv/bin/python scripts/bench_memory.py out/scenarios/highway_day --ref 7200 --sumo-args "--scale 0.1" --out out/memory_day_10
+    # the two cases side by side (e.g. in two processes), then one figure:
+    ... --only plain --out out/plain; ... --only blendtrack --out out/bt; ... --merge out/plain out/bt --out out/both
 """
 
 from __future__ import annotations
@@ -117,6 +119,9 @@ def main() -> int:
     p.add_argument("--interval", type=float, default=2.0, help="wall seconds between samples")
     p.add_argument("--fraction", type=float, default=1.0, help="controlled fraction for the blendtrack run")
     p.add_argument("--sumo-args", default="", help="extra SUMO options for both runs, e.g. \"--scale 0.1\" (a tenth of the demand)")
+    p.add_argument("--only", choices=["blendtrack", "plain"], help="run one of the two cases")
+    p.add_argument("--merge", type=Path, nargs="+", metavar="DIR",
+                   help="run nothing: table and figure of the memory.csv files in these folders (e.g. two --only runs)")
     p.add_argument("--out", type=Path, required=True)
     args = p.parse_args()
 
@@ -127,13 +132,22 @@ def main() -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     py = sys.executable
     bt = str(Path(py).with_name("blendtrack"))
-    with open(args.out / "memory.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["case", "wall_s", "sim_s", "rss_mb"])
-        rows = watch([bt, "sumo", "run", str(args.scenario), "--controlled-fraction", str(args.fraction), "--end", str(end),
-                      "--sumo-args", f"--no-warnings true {args.sumo_args}", "--out", str(args.out / "run")],
-                     f"blendtrack, {args.fraction:.0%} controlled", args.interval, w, f.flush)
-        rows += watch([py, "-c", PLAIN, str(sc.sumocfg), str(end), args.sumo_args], "plain SUMO", args.interval, w, f.flush)
+    rows: list[tuple[str, float, float, float]] = []
+    if args.merge:
+        for d in args.merge:
+            with open(d / "memory.csv", newline="") as f:
+                rows += [(r["case"], float(r["wall_s"]), float(r["sim_s"]), float(r["rss_mb"])) for r in csv.DictReader(f)]
+    else:
+        with open(args.out / "memory.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["case", "wall_s", "sim_s", "rss_mb"])
+            if args.only in (None, "blendtrack"):
+                rows += watch([bt, "sumo", "run", str(args.scenario), "--controlled-fraction", str(args.fraction), "--end",
+                               str(end), "--sumo-args", f"--no-warnings true {args.sumo_args}", "--out", str(args.out / "run")],
+                              f"blendtrack, {args.fraction:.0%} controlled", args.interval, w, f.flush)
+            if args.only in (None, "plain"):
+                rows += watch([py, "-c", PLAIN, str(sc.sumocfg), str(end), args.sumo_args], "plain SUMO", args.interval, w,
+                              f.flush)
 
     import matplotlib
 
