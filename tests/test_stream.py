@@ -116,3 +116,41 @@ def test_a_killed_run_keeps_the_finished_rows_and_says_incomplete(tmp_path: Path
     assert len({row["id"] for row in rows}) == len(rows)
     assert (out / "INCOMPLETE").is_file()
     assert not (out / "summary.json").exists()
+
+
+#: Run in a fresh process (libsumo: one simulation per process): the urban
+#: grid, every vehicle controlled, no records kept; every 20 simulated s the
+#: VehicleRecord objects alive are counted (after a full collection) beside
+#: the vehicles driving and those finished.
+_COUNT_RECORDS = r"""
+import gc, json, sys
+from blendtrack import sumo
+from blendtrack.sumo.records import VehicleRecord
+samples = []
+def hook(run, t):
+    if round(t * 10) % 200 == 0:
+        gc.collect()
+        alive = sum(isinstance(o, VehicleRecord) for o in gc.get_objects())
+        samples.append((alive, len(run.active), run.vehicles.totals.vehicles))
+opts = sumo.RunOptions(controlled_fraction=1.0, end_s=200.0, progress=False, keep_records=False,
+                       sumo_args=("--no-warnings", "true"))
+run = sumo.SumoRun(sumo.resolve_scenario(sys.argv[1]), opts, None)
+run.step_hooks.append(hook)
+run.run()
+print(json.dumps(samples))
+"""
+
+
+def test_a_finished_vehicles_record_is_freed() -> None:
+    # What a run keeps of a vehicle that left is bounded: the records alive
+    # are exactly those of the vehicles still driving (hooks run before the
+    # step's arrivals are dropped, so each driving vehicle has one), however
+    # many finished before.
+    import json
+
+    p = subprocess.run([sys.executable, "-c", _COUNT_RECORDS, str(GRID)], capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr
+    samples = json.loads(p.stdout.strip().splitlines()[-1])
+    assert len(samples) == 10
+    assert all(alive == driving for alive, driving, _ in samples), samples
+    assert samples[-1][2] > 20, "vehicles finished (69 by 200 s in the snapshot run), their records gone"
