@@ -378,6 +378,11 @@ def test_sumo_runs_in_a_worker_and_a_run_over_its_time_limit_is_killed(tmp_path:
     assert 0 < short["metrics"]["lateral_error_mean_abs_m"] < 0.5
     assert (out / "work" / short["run_id"] / "vehicles.csv").is_file()
     assert long_["status"] == "timeout" and long_["error"].startswith("timed out after 40 s")
-    assert not (out / "work" / long_["run_id"] / "vehicles.csv").exists(), "a killed run wrote no result"
+    # A killed run wrote no result: its folder says INCOMPLETE, has no summary,
+    # and vehicles.csv (written as vehicles finish) no row: no ring vehicle finished.
+    killed = out / "work" / long_["run_id"]
+    assert (killed / "INCOMPLETE").is_file() and not (killed / "summary.json").exists()
+    rows = killed / "vehicles.csv"
+    assert not rows.exists() or rows.read_text().count("\n") <= 1
     assert not _processes_under(out), "the timed-out run left processes behind"
     assert "| timeout | 1 |" in (out / "summary.md").read_text()

@@ -354,12 +354,22 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         fcd=args.fcd,
         ssm=args.ssm,
         progress=not args.quiet,
+        keep_records=False,
     )
     out = FsPath(args.out)
-    result = sumo.run_scenario(scenario, options, out)
+    # SIGTERM stops the run as Ctrl-C does: SUMO is closed, the rows of the
+    # vehicles that finished stay in vehicles.csv, the folder stays INCOMPLETE.
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    try:
+        result = sumo.run_scenario(scenario, options, out)
+    except KeyboardInterrupt:
+        print(f"blendtrack sumo run: interrupted; {out} is marked INCOMPLETE, vehicles.csv holds the vehicles that finished",
+              file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     s = result.summary
-    rows = [vars_row for vars_row in result.records if vars_row.steps > 0]
-    mean_e = sum(r.sum_abs_e for r in rows) / max(sum(r.steps for r in rows), 1)
+    mean_e = result.totals.sum_abs_e / max(result.totals.steps, 1)
     print(
         f"{out}: {scenario.name}, {s['end_s']:.0f} s simulated in {s['wall_time_s']:.1f} s; "
         f"{s['controlled_vehicles']} controlled, {s['background_vehicles']} background vehicles; "

@@ -147,15 +147,20 @@ def _run_options(task: dict[str, Any]) -> Any:
 
 
 def run_sumo(task: dict[str, Any], work: Path) -> dict[str, float | None]:
+    import csv
+
     from blendtrack import sumo
-    from blendtrack.sumo.report import vehicle_row
 
     scenario = sumo.resolve_scenario(task["scenario"])
-    result = sumo.run_scenario(scenario, _run_options(task), work)
+    options = dataclasses.replace(_run_options(task), keep_records=False)
+    result = sumo.run_scenario(scenario, options, work)
     metrics: dict[str, Any] = {k: result.summary[k] for k in SUMO_SUMMARY_METRICS}
-    rows = [vehicle_row(r) for r in result.records]
+    # From vehicles.csv, written as vehicles finished (a NaN is an empty field;
+    # the other floats are written exactly).
+    with open(work / "vehicles.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
     for col in SUMO_VEHICLE_METRICS:
-        vals = [float(r[col]) for r in rows if r[col] == r[col]]
+        vals = [float(r[col]) for r in rows if r[col] != ""]
         metrics[col] = sum(vals) / len(vals) if vals else math.nan
     return _finite(metrics)
 
@@ -164,6 +169,7 @@ def run_compare(task: dict[str, Any], work: Path) -> dict[str, float | None]:
     """One seed of ``blendtrack compare`` (the loop body of compare.compare)."""
     from blendtrack import sumo
     from blendtrack.sumo import compare
+    from blendtrack.sumo.report import vehicle_ids
 
     p = task["params"]
     seed = task["seed"]
@@ -181,8 +187,8 @@ def run_compare(task: dict[str, Any], work: Path) -> dict[str, float | None]:
     sc = compare.with_model(scenario, opts.baseline, work / "model")
     compare.run_baseline(sc, seed, end_s, work / "baseline", opts.run.sumo_args)
     ropt = dataclasses.replace(opts.run, seed=seed, end_s=end_s)
-    treat = compare.run_treatment(sc, ropt, work / "treatment")
-    controlled = {r.vid for r in treat.records}
+    compare.run_treatment(sc, ropt, work / "treatment")
+    controlled = vehicle_ids(work / "treatment" / "vehicles.csv")
     base_run = compare.load_run(work / "baseline", compare.selector(opts, sc, seed))
     treat_run = compare.load_run(work / "treatment", lambda vid, vtype: vid in controlled)
     paired = compare.pair(seed, base_run, treat_run, sc.step_length_s, scenario.comfort_lateral_accel_mps2)

@@ -6,8 +6,11 @@
 - :class:`SumoRun` runs it with the selected vehicles under blendtrack
   control (libsumo in-process, or TraCI for sumo-gui).
 - :func:`run_scenario` does both and writes the outputs
-  (``vehicles.csv``, ``summary.json``, plots, SUMO's own outputs in ``sumo/``);
-  the folder holds an ``INCOMPLETE`` marker until they are all written.
+  (``vehicles.csv``, a row per vehicle as it finishes, ``summary.json``,
+  plots, SUMO's own outputs in ``sumo/``); the folder holds an
+  ``INCOMPLETE`` marker from the start until they are all written, so a
+  killed run's folder says so (and keeps the rows of the vehicles that
+  finished).
 """
 
 from __future__ import annotations
@@ -95,8 +98,12 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     for name in OUTPUTS:
         (out / name).unlink(missing_ok=True)
     run = SumoRun(scenario, options, out)
+    if options.trace:
+        run.trace.stream(out / "trace.csv")
     try:
-        result = run.run()
+        with report.VehicleWriter(out / "vehicles.csv") as rows:
+            run.vehicles.finished.append(rows.write)
+            result = run.run()
     except Exception as e:
         if not _is_sumo_error(e):
             raise
@@ -104,10 +111,10 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
         raise ScenarioError(
             f"{scenario.sumocfg}: SUMO stopped the run: {first} (see {out / 'sumo' / 'sumo.log'})"
         ) from None
+    finally:
+        run.trace.close()
     _count_collisions(result, out)
-    report.write_vehicles_csv(result.records, out / "vehicles.csv")
     if options.trace:
-        run.write_trace(out / "trace.csv")
         report.plot_alpha(out / "trace.csv", out / "alpha.png")
     report.plot_run(result, out, scenario.comfort_lateral_accel_mps2)
     report.write_json(result.summary, out / "summary.json")
@@ -123,13 +130,29 @@ def _count_collisions(result: RunResult, out: Path) -> None:
 
     from blendtrack.sumo.outputs import COLLISION_COLUMNS, read_collisions
 
-    rows = read_collisions(out / "sumo" / "collisions.xml", {r.vid for r in result.records})
+    rows = read_collisions(out / "sumo" / "collisions.xml", _Ids(out / "vehicles.csv"))
     result.summary["collisions_all"] = len(rows)
     result.summary["collisions_with_controlled"] = sum(int(r["controlled_involved"]) for r in rows)
     with open(out / "collisions.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLLISION_COLUMNS)
         w.writeheader()
         w.writerows(rows)
+
+
+class _Ids:
+    """The controlled vehicles' ids, read from ``vehicles.csv`` when first asked
+    (most runs have no collision to ask about)."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._ids: set[str] | None = None
+
+    def __contains__(self, vid: object) -> bool:
+        if self._ids is None:
+            from blendtrack.sumo.report import vehicle_ids
+
+            self._ids = vehicle_ids(self.path)
+        return vid in self._ids
 
 
 def _run_in_child(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:

@@ -46,6 +46,11 @@ class RunOptions:
     #: Extra SUMO command-line options.
     sumo_args: tuple[str, ...] = ()
     progress: bool = True
+    #: Keep every controlled vehicle's record in memory (``RunResult.records``).
+    #: Without, a record goes once its vehicle finishes (its row is in
+    #: ``vehicles.csv`` and its sums in ``RunResult.totals``): a long run's
+    #: memory stays flat. ``blendtrack sumo run`` keeps none.
+    keep_records: bool = True
     #: Keep the trajectories of this many controlled vehicles (for plots; -1 = all).
     keep_trajectories: int = 1
     #: Extra distance (m) kept to leaders and stop lines at standstill, on top

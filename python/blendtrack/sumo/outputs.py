@@ -5,6 +5,7 @@ output."""
 from __future__ import annotations
 
 import math
+from collections.abc import Container
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -114,7 +115,7 @@ def read_tripinfo(file: Path) -> dict[str, dict[str, float]]:
 COLLISION_COLUMNS = ("time_s", "type", "lane", "collider", "victim", "collider_type", "victim_type", "controlled_involved")
 
 
-def read_collisions(file: Path, controlled: set[str]) -> list[dict[str, object]]:
+def read_collisions(file: Path, controlled: Container[str]) -> list[dict[str, object]]:
     """Every collision in SUMO's collision output, whatever ``collision.action``
     made of it (a warning, a teleport, a removal), with who was involved and
     whether a vehicle of ``controlled`` was one of them; [] without the file."""

@@ -1,5 +1,6 @@
-"""What a SUMO run keeps: per-vehicle records (``vehicles.csv``), the run's
-result, and the per-step trace of the controlled vehicles (``trace.csv``)."""
+"""What a SUMO run keeps: per-vehicle records (``vehicles.csv``, written as
+vehicles finish), their running totals for the summary, the run's result,
+and the per-step trace of the controlled vehicles (``trace.csv``)."""
 
 from __future__ import annotations
 
@@ -51,6 +52,33 @@ class VehicleRecord:
     stop_skip_reasons: str = ""
 
 
+@dataclass
+class RecordTotals:
+    """Running sums over the records of the vehicles that finished: what the
+    summary needs of them, so a record can go (to ``vehicles.csv``) as soon
+    as its vehicle finishes."""
+
+    vehicles: int = 0
+    collisions: int = 0
+    teleports: int = 0
+    red_light_violations: int = 0
+    speed_warnings: int = 0
+    reverse_warnings: int = 0
+    #: Control steps and the sum of |lateral error| over them (a run's mean |e|).
+    steps: int = 0
+    sum_abs_e: float = 0.0
+
+    def add(self, r: VehicleRecord) -> None:
+        self.vehicles += 1
+        self.collisions += r.collisions
+        self.teleports += r.teleports
+        self.red_light_violations += r.red_light_violations
+        self.speed_warnings += r.speed_warnings
+        self.reverse_warnings += r.reverse_warnings
+        self.steps += r.steps
+        self.sum_abs_e += r.sum_abs_e
+
+
 class SampleHistograms:
     """Fixed-bin histograms of the controlled vehicles' samples, for the
     plots: |lateral error| (0.01 m bins to 2 m, the last bin holding all
@@ -83,26 +111,50 @@ class SampleHistograms:
 
 @dataclass
 class RunResult:
+    #: Every controlled vehicle's record, in the order they were taken over;
+    #: empty unless ``RunOptions.keep_records`` (``vehicles.csv`` has them all).
     records: list[VehicleRecord]
     summary: dict[str, Any]
     #: vid -> (trajectory rows (t, x, y, v, e, kappa), its reference points).
     trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = field(default_factory=dict)
     #: Histograms of the samples of (|curvature|, speed, |lateral error|) of controlled vehicles.
     histograms: SampleHistograms = field(default_factory=SampleHistograms)
+    #: Running sums over all the records (kept or not).
+    totals: RecordTotals = field(default_factory=RecordTotals)
 
 
 class Trace:
-    """The per-step trace of every controlled vehicle (``RunOptions.trace``)."""
+    """The per-step trace of every controlled vehicle (``RunOptions.trace``):
+    kept in memory, or written as it comes once :meth:`stream` has opened a
+    file (a long run's memory stays flat)."""
 
     def __init__(self) -> None:
         self.rows: list[tuple[Any, ...]] = []
+        self._file: Any = None
+        self._csv: Any = None
+
+    def stream(self, file: Path) -> None:
+        """Writes the rows to ``file`` from now on (the header at once), none kept."""
+        import csv
+
+        self._file = open(file, "w", newline="")
+        self._csv = csv.writer(self._file)
+        self._csv.writerow(TRACE_COLUMNS)
+
+    def close(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = self._csv = None
 
     def add(self, t: float, ids: list[str], out: dict[str, np.ndarray], edge_names: list[str]) -> None:
         """This step's rows, from ``RouteFleet.step``'s output ``out`` (in the order of ``ids``)."""
         cols = [out[k].tolist() for k in TRACE_KEYS]
         edges = [edge_names[e] for e in out["edge"].tolist()]
-        for row in zip(ids, *cols, edges, out["lane_index"].tolist()):
-            self.rows.append((t, *row))
+        rows = [(t, *row) for row in zip(ids, *cols, edges, out["lane_index"].tolist())]
+        if self._csv is not None:
+            self._csv.writerows(rows)
+        else:
+            self.rows.extend(rows)
 
     def write(self, file: Path) -> None:
         import csv

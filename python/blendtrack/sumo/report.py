@@ -1,7 +1,8 @@
 """Outputs of a SUMO run: ``vehicles.csv``, ``summary.json``, the trace and plots.
 
-Files are written to a temporary name and renamed into place, so an
-interrupted run never leaves a file that looks complete.
+``vehicles.csv`` is written as vehicles finish (:class:`VehicleWriter`);
+the other files are written to a temporary name and renamed into place, so
+an interrupted run never leaves one that looks complete.
 """
 
 from __future__ import annotations
@@ -94,16 +95,55 @@ def _atomic_write(path: Path, write: Any) -> None:
     os.replace(tmp, path)
 
 
+def _csv_row(r: VehicleRecord) -> dict[str, Any]:
+    return {k: ("" if isinstance(v, float) and not math.isfinite(v) else v) for k, v in vehicle_row(r).items()}
+
+
 def write_vehicles_csv(records: Iterable[VehicleRecord], path: Path) -> None:
-    rows = [vehicle_row(r) for r in records]
+    rows = [_csv_row(r) for r in records]
 
     def write(f: Any) -> None:
         w = csv.DictWriter(f, fieldnames=[*VEHICLE_COLUMNS, *EXTRA_COLUMNS])
         w.writeheader()
-        for row in rows:
-            w.writerow({k: ("" if isinstance(v, float) and not math.isfinite(v) else v) for k, v in row.items()})
+        w.writerows(rows)
 
     _atomic_write(path, write)
+
+
+class VehicleWriter:
+    """``vehicles.csv`` written as vehicles finish: the header at once, then
+    one row per finished vehicle (:meth:`write`, a ``Controlled.finished``
+    sink), appended and flushed, so a run killed at any point leaves the
+    rows of the vehicles that finished before it (the output folder's
+    ``INCOMPLETE`` marker says the run did not end). Same columns and row
+    content as :func:`write_vehicles_csv`; the rows come in the order the
+    vehicles finished."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._file = open(path, "w", newline="")
+        self._csv = csv.DictWriter(self._file, fieldnames=[*VEHICLE_COLUMNS, *EXTRA_COLUMNS])
+        self._csv.writeheader()
+        self._file.flush()
+
+    def write(self, r: VehicleRecord) -> None:
+        self._csv.writerow(_csv_row(r))
+        self._file.flush()
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> VehicleWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def vehicle_ids(path: Path) -> set[str]:
+    """The ids in a ``vehicles.csv``."""
+    with open(path, newline="") as f:
+        return {row["id"] for row in csv.DictReader(f)}
 
 
 def write_json(data: dict[str, Any], path: Path) -> None:

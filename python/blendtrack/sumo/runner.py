@@ -127,8 +127,11 @@ class SumoRun:
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel)
         self.stops = Stops(self.conn, self.fleet, self.network)
         self.trace = Trace()
+        #: The vehicles in the simulation whose departure was seen (an id
+        #: goes when its vehicle arrives, so the set stays as small as the traffic).
         self._seen: set[str] = set()
-        self._background: set[str] = set()
+        #: Vehicles left to SUMO (not selected, or not drivable).
+        self._background = 0
         #: Control steps so far.
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
@@ -163,20 +166,26 @@ class SumoRun:
     def run(self) -> RunResult:
         wall0 = time.perf_counter()
         self.conn.start()
+        completed = False
         try:
             end = self.opt.end_s if self.opt.end_s is not None else self.scenario.default_end_s
             steps = self._loop(end)
+            completed = True
         finally:
             t_end = self.conn.time()
+            if not completed:
+                # The run broke off: the vehicles still driving did not finish (no rows for them).
+                self.vehicles.finished.clear()
             for vid in list(self.active):
                 self._drop(vid, t_end, "end")
             self.conn.close()
         wall = time.perf_counter() - wall0
         self.histograms.add(self.fleet.take_samples())
-        return RunResult(self.records, self._summary(t_end, steps, wall), self.vehicles.trajectories, self.histograms)
+        return RunResult(self.records, self._summary(t_end, steps, wall), self.vehicles.trajectories, self.histograms,
+                         self.vehicles.totals)
 
     def _summary(self, t_end: float, steps: int, wall: float) -> dict[str, Any]:
-        records, counts, lanes = self.records, self.counts, self.lanes.counts
+        totals, counts, lanes = self.vehicles.totals, self.counts, self.lanes.counts
         return {
             "scenario": self.scenario.name,
             "sumocfg": str(self.scenario.sumocfg),
@@ -187,15 +196,15 @@ class SumoRun:
             "steps": steps,
             "step_length_s": self.conn.dt,
             "control_dt_s": self.opt.control_dt_s,
-            "controlled_vehicles": len(records),
-            "background_vehicles": len(self._background),
+            "controlled_vehicles": totals.vehicles,
+            "background_vehicles": self._background,
             "collisions": counts["collision_events"],
-            "controlled_vehicles_in_collisions": sum(r.collisions for r in records),
-            "teleports": sum(r.teleports for r in records),
-            "red_light_violations": sum(r.red_light_violations for r in records),
+            "controlled_vehicles_in_collisions": totals.collisions,
+            "teleports": totals.teleports,
+            "red_light_violations": totals.red_light_violations,
             "vanished": counts["vanished"],
-            "speed_warnings": sum(r.speed_warnings for r in records),
-            "reverse_warnings": sum(r.reverse_warnings for r in records),
+            "speed_warnings": totals.speed_warnings,
+            "reverse_warnings": totals.reverse_warnings,
             "wall_time_s": wall,
             "steps_per_second": steps / wall if wall > 0 else math.nan,
             "comfort_lateral_accel_mps2": self.scenario.comfort_lateral_accel_mps2,
@@ -253,6 +262,7 @@ class SumoRun:
         ev = sumo.simulation.getSubscriptionResults()
         for vid in ev.get(tc.VAR_ARRIVED_VEHICLES_IDS, ()):
             self._drop(vid, t, "arrived")
+            self._seen.discard(vid)
         for vid in ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ()):
             if vid in self.active:
                 self._drop(vid, t, "teleport")
@@ -273,7 +283,7 @@ class SumoRun:
             if self.opt.tactical_lane_changes:
                 self.lanes.note_insertion(vid)
             vtype = sumo.vehicle.getTypeID(vid)
-            if self.selection.is_selected(vid, vtype, len(self.records)):
+            if self.selection.is_selected(vid, vtype, self.vehicles.taken):
                 try:
                     self.vehicles.take_over(vid, t)
                     if vid in self.active:
@@ -281,9 +291,9 @@ class SumoRun:
                 except blendtrack.PathError:
                     # An undrivable route: leave it to SUMO, and say so.
                     self.counts["takeover_failures"] += 1
-                    self._background.add(vid)
+                    self._background += 1
             else:
-                self._background.add(vid)
+                self._background += 1
 
     def _control_step(self, t: float) -> None:
         """Observe, then plan and step, then apply."""

@@ -1,11 +1,13 @@
 """The controlled vehicles' reference tracks: each route (from a lane, with
 its lane pieces and stop lines) registered once with the RouteFleet and
-shared by every vehicle on it, a track of its own for a vehicle changing
+shared by every vehicle on it (kept while driven, and a bounded number of
+the ones left for later vehicles), a track of its own for a vehicle changing
 lanes, putting a vehicle on another track (retracking, rebuilding after a
 reroute), and SUMO's string ids interned as the integers RouteFleet takes."""
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Any
 
@@ -14,6 +16,14 @@ from blendtrack import ControllerConfig, RouteFleet
 from blendtrack.sumo.geometry import RouteGeometry, route_geometry
 from blendtrack.sumo.network import Network
 from blendtrack.sumo.records import VehicleRecord
+
+#: Shared tracks nobody drives kept for the next vehicle on the same route
+#: and lane, at most this many (the one left longest ago goes first): a long
+#: run's track registry stays bounded by the tracks driven at once plus
+#: this, and a route driven now and then is not rebuilt for each vehicle.
+IDLE_TRACKS = 64
+
+_Key = tuple[tuple[str, ...], int]
 
 
 class Interned:
@@ -57,6 +67,8 @@ class Active:
     #: The track built for this vehicle alone (a lane change in it), removed
     #: from the RouteFleet once the vehicle leaves it; None on a shared track.
     own_track: int | None = None
+    #: The track the vehicle drives (shared, or its own).
+    track: int = -1
 
 
 class Tracks:
@@ -68,7 +80,12 @@ class Tracks:
         self.config = config
         self.border_margin_m = border_margin_m
         #: (edges, lane index) -> the shared track of that route from that lane.
-        self.geo_cache: dict[tuple[tuple[str, ...], int], tuple[RouteGeometry, int]] = {}
+        self.geo_cache: dict[_Key, tuple[RouteGeometry, int]] = {}
+        #: Shared track -> its key in geo_cache, and the vehicles on it.
+        self._key: dict[int, _Key] = {}
+        self._users: dict[int, int] = {}
+        #: The keys of the shared tracks nobody drives, the one left longest ago first.
+        self._idle: OrderedDict[_Key, None] = OrderedDict()
         self.lanes = Interned()
         self.edges = Interned()
         self.lights = Interned()
@@ -120,7 +137,37 @@ class Tracks:
             hit = (geo, track)
             if change is None:
                 self.geo_cache[key] = hit
+                self._key[track] = key
+                self._idle[key] = None
+                self._trim()
         return hit
+
+    def enter(self, track: int) -> None:
+        """A vehicle is put on ``track`` (shared ones are kept while driven)."""
+        key = self._key.get(track)
+        if key is not None:
+            self._users[track] = self._users.get(track, 0) + 1
+            self._idle.pop(key, None)
+
+    def leave(self, track: int) -> None:
+        """A vehicle left ``track`` (a shared one nobody drives is kept for
+        later among the last ``IDLE_TRACKS`` left)."""
+        key = self._key.get(track)
+        if key is None:
+            return
+        n = self._users.pop(track) - 1
+        if n:
+            self._users[track] = n
+        else:
+            self._idle[key] = None
+            self._trim()
+
+    def _trim(self) -> None:
+        while len(self._idle) > IDLE_TRACKS:
+            key, _ = self._idle.popitem(last=False)
+            _, track = self.geo_cache.pop(key)
+            del self._key[track]
+            self.fleet.remove_route(track)
 
     def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool) -> None:
         """Puts ``act`` on ``track`` (``owned``: built for it alone); a track
@@ -128,9 +175,14 @@ class Tracks:
         changes do not pile up tracks."""
         self.fleet.retrack(act.slot, track)
         old, act.own_track = act.own_track, (track if owned else None)
+        left, act.track = act.track, track
         act.geo = geo
+        if not owned:
+            self.enter(track)
         if old is not None and old != track:
             self.fleet.remove_route(old)
+        elif old is None:
+            self.leave(left)
 
     def rebuild(self, act: Active, vehicle: Any) -> None:
         """The route changed (rerouting): a new track from where the vehicle

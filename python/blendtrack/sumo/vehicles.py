@@ -6,13 +6,14 @@ fixed order."""
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
 from blendtrack import ControllerConfig, RouteFleet, VehicleParams
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.options import RunOptions
-from blendtrack.sumo.records import VehicleRecord
+from blendtrack.sumo.records import RecordTotals, VehicleRecord
 from blendtrack.sumo.selection import PARAM_PREFIX, Selection
 from blendtrack.sumo.tracks import Active, Tracks
 
@@ -30,8 +31,16 @@ class Controlled:
         self.fleet = fleet
         self.opt = options
         self.active: dict[str, Active] = {}
-        #: Every vehicle taken over, in the order they were.
+        #: Every vehicle taken over, in the order they were (kept only with
+        #: ``RunOptions.keep_records``; otherwise a record goes when its
+        #: vehicle finishes, see ``finished``).
         self.records: list[VehicleRecord] = []
+        #: Vehicles taken over so far.
+        self.taken = 0
+        #: Running sums over the finished vehicles' records.
+        self.totals = RecordTotals()
+        #: Called with each record when its vehicle finishes (e.g. a row of ``vehicles.csv``).
+        self.finished: list[Callable[[VehicleRecord], None]] = []
         #: vid -> (trajectory rows (t, x, y, v, e, kappa), its reference points).
         self.trajectories: dict[str, tuple[np.ndarray, np.ndarray]] = {}
         #: The vehicles keeping a trajectory.
@@ -83,8 +92,11 @@ class Controlled:
             name=vid,
         )
         rec = VehicleRecord(vid=vid, vtype=vtype, depart_s=t)
-        self.records.append(rec)
-        act = Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec)
+        self.taken += 1
+        if self.opt.keep_records:
+            self.records.append(rec)
+        self.tracks.enter(track)
+        act = Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec, track=track)
         if len(self.trajectories) + len(self.tracing) < self.opt.keep_trajectories or self.opt.keep_trajectories < 0:
             act.trajectory = []
             self.tracing[vid] = act
@@ -113,6 +125,8 @@ class Controlled:
             setattr(rec, key, value)
         if act.own_track is not None:
             self.fleet.remove_route(act.own_track)
+        else:
+            self.tracks.leave(act.track)
         rec.end_s = t
         rec.reason = reason
         if act.trajectory is not None and act.trajectory:
@@ -121,6 +135,9 @@ class Controlled:
             rec.collisions += 1
         elif reason == "teleport":
             rec.teleports += 1
+        self.totals.add(rec)
+        for sink in self.finished:
+            sink(rec)
         if reason not in ("arrived", "end"):
             # Hand the vehicle back to SUMO's own models if it is still there.
             # setSpeed(-1) ends the last speed command: SUMO keeps applying

@@ -322,8 +322,8 @@ impl RouteFleet {
         self.inner.retrack(slot, track_id).map_err(traffic_error)
     }
 
-    /// Removes a track no vehicle drives any more (its memory is freed; the
-    /// id is not reused). One still driven raises InputError naming a slot.
+    /// Removes a track no vehicle drives any more (its memory is freed; a
+    /// later add_route may reuse the id). One still driven raises InputError naming a slot.
     fn remove_route(&mut self, track_id: i64) -> PyResult<()> {
         self.inner.remove_route(track_id).map_err(traffic_error)
     }
@@ -724,6 +724,13 @@ impl RouteFleet {
     #[getter]
     fn n_tracks(&self) -> usize {
         self.inner.fleet().n_tracks()
+    }
+
+    /// Track ids in the registry, removed ones included: the most tracks
+    /// registered at once (removed ids are handed out again).
+    #[getter]
+    fn track_capacity(&self) -> usize {
+        self.inner.fleet().track_capacity()
     }
 
     /// Threads a step of many vehicles is split over: 0 (the default) for

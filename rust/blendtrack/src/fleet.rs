@@ -180,7 +180,7 @@ struct TrackEntry {
 /// Tracks and vehicles stepped together (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct Fleet {
-    /// By id; None once removed (ids are never reused).
+    /// By id; None once removed (the id is handed out again, lowest first).
     tracks: Vec<Option<TrackEntry>>,
     slots: Vec<Option<Entry>>,
     n_active: usize,
@@ -220,12 +220,26 @@ impl Fleet {
     }
 
     /// Registers a track; `config` builds its corridor and is the default
-    /// configuration of the vehicles added to it. Returns the track id.
+    /// configuration of the vehicles added to it. Returns the track id: the
+    /// lowest id free (a removed track's is handed out again, as slots are),
+    /// so the registry stays as large as the most tracks registered at once.
     pub fn add_track(&mut self, path: Path, config: ControllerConfig) -> Result<usize, FleetError> {
         config.validate()?;
-        let track = Arc::new(Track::new(path, &config));
-        self.tracks.push(Some(TrackEntry { track, config }));
+        let entry = Some(TrackEntry {
+            track: Arc::new(Track::new(path, &config)),
+            config,
+        });
+        if let Some(id) = self.tracks.iter().position(Option::is_none) {
+            self.tracks[id] = entry;
+            return Ok(id);
+        }
+        self.tracks.push(entry);
         Ok(self.tracks.len() - 1)
+    }
+
+    /// Ids in the registry, removed ones included (its memory's bound).
+    pub fn track_capacity(&self) -> usize {
+        self.tracks.len()
     }
 
     /// Tracks registered and not removed.
@@ -234,7 +248,7 @@ impl Fleet {
     }
 
     /// Removes a track no vehicle drives any more (its memory goes with
-    /// it); its id is not reused. A track still driven is an error naming
+    /// it); a later `add_track` may reuse its id. A track still driven is an error naming
     /// a slot on it, and nothing changes.
     pub fn remove_track(&mut self, track_id: i64) -> Result<(), FleetError> {
         self.track_entry(track_id)?;
@@ -883,7 +897,7 @@ mod tests {
         ] {
             assert_eq!(err, FleetError::UnknownTrack { track_id: 1 });
         }
-        // The vehicles left still step, and a new track gets a new id.
+        // The vehicles left still step, and a new track gets the freed id.
         let n = f.len();
         let (x, y, th, v, d) = (
             vec![0.0; n],
@@ -901,7 +915,8 @@ mod tests {
                 ControllerConfig::default(),
             )
             .unwrap();
-        assert_eq!(id, 2);
+        assert_eq!(id, 1);
+        assert_eq!((f.n_tracks(), f.track_capacity()), (2, 2));
     }
 
     #[test]

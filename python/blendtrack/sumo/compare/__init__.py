@@ -71,6 +71,7 @@ def compare(scenario: Scenario, opts: CompareOptions, out: Path) -> list[dict[st
     from tqdm import tqdm
 
     from blendtrack.sumo.preflight import check_selection, reconcile_sumo_args
+    from blendtrack.sumo.report import vehicle_ids
 
     # The same pre-run checks as sumo run (one intake for both).
     opts = dataclasses.replace(opts, run=reconcile_sumo_args(opts.run))
@@ -99,9 +100,9 @@ def compare(scenario: Scenario, opts: CompareOptions, out: Path) -> list[dict[st
                 bar.set_postfix_str(f"seed {seed} treatment")
                 ropt = dataclasses.replace(opts.run, controlled_fraction=opts.controlled_fraction,
                                            controlled_type=opts.controlled_type, seed=seed, end_s=end_s, progress=False)
-                treat = run_treatment(sc, ropt, rd / "treatment")
+                run_treatment(sc, ropt, rd / "treatment")
                 bar.update()
-                tctl = {r.vid for r in treat.records}
+                tctl = vehicle_ids(rd / "treatment" / "vehicles.csv")
                 base_run = load_run(rd / "baseline", selector(opts, sc, seed))
                 treat_run = load_run(rd / "treatment", lambda vid, vtype: vid in tctl)
                 results.append(pair(seed, base_run, treat_run, dt, scenario.comfort_lateral_accel_mps2))

@@ -122,5 +122,7 @@ def run_treatment(scenario: Scenario, options: RunOptions, out: Path) -> Any:
 
     sd = out / "sumo"
     sd.mkdir(parents=True, exist_ok=True)
-    options = dataclasses.replace(options, fcd=True, ssm=True, sumo_args=(*options.sumo_args, *_output_args(sd)))
+    # The controlled vehicles' rows are in out/vehicles.csv (report.vehicle_ids): no records kept.
+    options = dataclasses.replace(options, fcd=True, ssm=True, keep_records=False,
+                                  sumo_args=(*options.sumo_args, *_output_args(sd)))
     return run_scenario(scenario, options, out)
