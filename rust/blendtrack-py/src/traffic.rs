@@ -49,6 +49,25 @@ fn u32_of(name: &str, i: usize, x: i64) -> PyResult<u32> {
     u32::try_from(x).map_err(|_| input_error(format!("{name}[{i}] = {x}: must be in [0, 2^32)")))
 }
 
+/// `add_route`'s `lane_change`: (edge, target lane index) or (edge, target
+/// lane index, occurrence of the edge).
+fn lane_change_due(items: &[i64]) -> PyResult<LaneChangeDue> {
+    let (&[e, t] | &[e, t, _]) = items else {
+        return Err(input_error(format!(
+            "lane_change has {} items, expected (edge, target lane index[, occurrence])",
+            items.len()
+        )));
+    };
+    Ok(LaneChangeDue {
+        edge: u32_of("lane_change edge", 0, e)?,
+        target_index: u32_of("lane_change target", 1, t)?,
+        occurrence: match items {
+            &[_, _, k] => Some(u32_of("lane_change occurrence", 2, k)?),
+            _ => None,
+        },
+    })
+}
+
 /// A vehicle's statistics as a dict, every entry the traffic crate names
 /// (raw sums and maxima, finished means and RMS, counts), built generically.
 fn stats_dict<'py>(py: Python<'py>, s: &DriveStats) -> PyResult<Bound<'py, PyDict>> {
@@ -253,23 +272,7 @@ impl RouteFleet {
                 check_inside: check_inside[i] != 0,
             });
         }
-        let lane_change = match lane_change.as_deref() {
-            Some(&[e, t]) | Some(&[e, t, _]) => Some(LaneChangeDue {
-                edge: u32_of("lane_change edge", 0, e)?,
-                target_index: u32_of("lane_change target", 1, t)?,
-                occurrence: match lane_change.as_deref() {
-                    Some(&[_, _, k]) => Some(u32_of("lane_change occurrence", 2, k)?),
-                    _ => None,
-                },
-            }),
-            Some(other) => {
-                return Err(input_error(format!(
-                    "lane_change has {} items, expected (edge, target lane index[, occurrence])",
-                    other.len()
-                )))
-            }
-            None => None,
-        };
+        let lane_change = lane_change.as_deref().map(lane_change_due).transpose()?;
         let route = Route::new(pieces, stops, length_m, lane_change).map_err(traffic_error)?;
         let cfg = config.map(|c| c.to_core()).transpose()?.unwrap_or_default();
         let p = path.inner.clone();
