@@ -89,10 +89,11 @@ class PlacementCheck:
     """Where blendtrack put each controlled vehicle's front last step, and
     the check of SUMO's against it."""
 
-    def __init__(self, lane_names: list[str], net: Any) -> None:
-        #: The interned lane names (``Tracks.lanes.names``, grows) and the network.
+    def __init__(self, lane_names: list[str], network: Any) -> None:
+        #: The interned lane names (``Tracks.lanes.names``, grows) and the
+        #: ``Network`` (read once a width is asked for: SUMO checks it first).
         self._names = lane_names
-        self._net = net
+        self._network = network
         self._widths = np.zeros(0)
         #: vid -> (x, y) of the front blendtrack put it at.
         self._front: dict[str, tuple[float, float]] = {}
@@ -112,7 +113,7 @@ class PlacementCheck:
         """A lane's width; +inf for a name that is no lane of the network
         (the empty lane of a vehicle SUMO has off the road)."""
         try:
-            return float(self._net.getLane(name).getWidth())
+            return float(self._network.net().getLane(name).getWidth())
         except (KeyError, ValueError):
             return math.inf
 

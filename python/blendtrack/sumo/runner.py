@@ -133,7 +133,7 @@ class SumoRun:
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
         self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "placement_faults": 0, "route_index_repairs": 0}
-        self.placement = PlacementCheck(self.tracks.lanes.names, self.network.net())
+        self.placement = PlacementCheck(self.tracks.lanes.names, self.network)
         #: Vehicles whose route index was repaired, by the lane they were on
         #: then: moved by lane position, not (x, y), while on it.
         self._by_lane: dict[str, int] = {}
