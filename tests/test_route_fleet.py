@@ -84,6 +84,9 @@ def test_red_light_holds_the_vehicle_and_moves_are_lane_moves() -> None:
         (lambda f, t, s: f.set_signal(1 << 21, "r"), "light"),
         (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0, -1.0], piece_scale=[1.0, 1.0], piece_offset_m=[0.0, 0.0], piece_lane_length_m=[1.0, 1.0], piece_speed_mps=[1.0, 1.0], piece_lane=[0, 0], piece_edge=[0, 0], piece_lane_index=[0, 0], length_m=1.0), "piece 1"),
         (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0], piece_scale=[1.0], piece_offset_m=[0.0], piece_lane_length_m=[1.0], piece_speed_mps=[1.0], piece_lane=[-3], piece_edge=[0], piece_lane_index=[0], length_m=1.0), "piece_lane"),
+        (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0, 0.5], piece_scale=[1.0, 1.0], piece_offset_m=[0.0, 0.0], piece_lane_length_m=[1.0, 1.0], piece_speed_mps=[1.0, 1.0], piece_lane=[0, 1], piece_edge=[0, 1], piece_lane_index=[0, 0], length_m=1.0, piece_occurrence=[1, 0]), "piece 1 has occurrence 0 after 1"),
+        (lambda f, t, s: f.add_route(blendtrack.Path(np.array([[0.0, 0.0], [1.0, 0.0]])), None, piece_start_m=[0.0], piece_scale=[1.0], piece_offset_m=[0.0], piece_lane_length_m=[1.0], piece_speed_mps=[1.0], piece_lane=[0], piece_edge=[0], piece_lane_index=[0], length_m=1.0, lane_change=(0, 1, 0, 0)), "lane_change has 4 items"),
+        (lambda f, t, s: f.retrack(s, t, occurrence=-1), "occurrence"),
     ],
 )
 def test_bad_calls_raise_input_error_and_leave_the_fleet_usable(call, match) -> None:  # type: ignore[no-untyped-def]

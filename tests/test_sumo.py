@@ -166,6 +166,7 @@ def test_grid_stops_for_red_lights_and_follows_leaders(grid: tuple[Path, sumo.Ru
     rows = _read_vehicles(out)
     assert len(rows) >= 30
     assert result.summary["red_light_violations"] == 0
+    assert result.summary["placement_faults"] == 0
     assert all(int(r["red_light_violations"]) == 0 for r in rows)
     # Controlled vehicles really met red lights: some of them stood still.
     with open(out / "trace.csv") as f:
@@ -187,6 +188,7 @@ def test_grid_with_every_vehicle_controlled_has_no_junction_collision(tmp_path: 
     result = sumo.run_scenario(sc, RunOptions(controlled_fraction=1.0, end_s=300, progress=False), tmp_path)
     assert result.summary["controlled_vehicles"] > 300
     assert _collisions(tmp_path) == []
+    assert result.summary["placement_faults"] == 0
     assert result.summary["red_light_violations"] == 0
     assert sum(r.reason == "arrived" for r in result.records) > 100, "traffic flows (no deadlock)"
 
@@ -339,6 +341,7 @@ def test_ramp_traffic_merges_with_every_vehicle_controlled(tmp_path: Path) -> No
     assert result.summary["merge_lead_steps"] > 0
     assert not standing, f"standing at the end of the acceleration lane: {standing[:3]}"
     assert result.summary["collisions"] == 0 and _collisions(tmp_path) == []
+    assert result.summary["placement_faults"] == 0
 
 
 def test_mergers_line_up_and_change_lanes_without_emergency_braking(tmp_path: Path) -> None:

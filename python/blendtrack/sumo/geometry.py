@@ -83,6 +83,10 @@ class RouteGeometry:
     piece_scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: SUMO's length of each piece's lane (m).
     piece_lane_length: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    #: Index into ``edges`` of each piece's edge (a junction lane: of the
+    #: edge before it), as SUMO's route index counts: a route that drives an
+    #: edge twice has two occurrences of its pieces, told apart by this.
+    piece_occurrence: list[int] = field(default_factory=list)
     #: Largest distance (m) between the track and the piece's SUMO lane
     #: centreline (the smoothing rounds the kinks where lanes meet); +inf
     #: where the track crosses between lanes (a lane change). Near the
@@ -153,6 +157,9 @@ class _Piece:
     #: Per point (right, left) distances (m) to the virtual borders, where
     #: they are not the lane's half width (the middle of a lane change).
     widths: np.ndarray | None = None
+    #: Index into the route's edges of the piece's edge (of the edge before
+    #: it for a junction lane): which time the route drives that edge.
+    occurrence: int = 0
 
 
 def _lane_piece(
@@ -301,9 +308,12 @@ def _pieces(
         lane = goal
     for k in range(len(objs)):
         first_done = chosen and k == 0
+        # Every piece from here on is of edge k (or its junction lanes) until the next k.
+        tag_from = len(out)
         if k + 1 == len(objs):
             if not first_done:
                 out.append(piece(lane))
+            _tag(out, tag_from, k)
             break
         cs = conns_to(lane, k + 1)
         if first_done:
@@ -321,6 +331,7 @@ def _pieces(
                 out.extend(_lane_change_pieces(lane, target, spacing_m, change[0], change[1]))
             elif defer_changes:
                 out.append(piece(lane))
+                _tag(out, tag_from, k)
                 return out, (k, target.getIndex())
             else:
                 out.extend(_lane_change_pieces(lane, target, spacing_m))
@@ -344,8 +355,15 @@ def _pieces(
             # SUMO's drivers wait there for oncoming traffic, and so do ours.
             v.tls = ("", -1, False)
         out.extend(vias)
+        _tag(out, tag_from, k)
         lane = c.getToLane()
     return out, None
+
+
+def _tag(pieces: list[_Piece], start: int, occurrence: int) -> None:
+    """``pieces[start:]`` are of the route's edge ``occurrence``."""
+    for pc in pieces[start:]:
+        pc.occurrence = occurrence
 
 
 def route_geometry(
@@ -420,6 +438,7 @@ def route_geometry(
         piece_lane_pos=joined["run_station"],
         piece_scale=joined["run_scale"],
         piece_lane_length=np.array([p.length_m for p in pieces_of]),
+        piece_occurrence=[p.occurrence for p in pieces_of],
         piece_offset=joined["run_offset"],
         length_m=joined["length_m"],
         pending_change=pending,

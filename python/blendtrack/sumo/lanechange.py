@@ -206,14 +206,17 @@ class LaneChanges:
         retried when there is room)."""
         lane_index = int(self.conn.sumo.vehicle.getLaneIndex(act.vid))
         geo, track = self.tracks.geometry(act.geo.edges, max(lane_index, 0))
-        self.tracks.retrack(act, geo, track, owned=False)
+        self.tracks.retrack(act, geo, track, owned=False, base=act.route_base)
         self.set_changing(act, None)
         self.counts["lane_changes_aborted"] += 1
 
-    def begin_change(self, act: Active, geo: RouteGeometry, track: int, direction: int, target: int, span: tuple[float, float]) -> None:
-        """``act`` starts a lane change on its own ``track`` (built for it),
-        over ``span`` (front's lane position where it starts, length)."""
-        self.tracks.retrack(act, geo, track, owned=True)
+    def begin_change(
+        self, act: Active, geo: RouteGeometry, track: int, base: int, direction: int, target: int, span: tuple[float, float]
+    ) -> None:
+        """``act`` starts a lane change on its own ``track`` (built for it,
+        from SUMO's route index ``base``), over ``span`` (front's lane
+        position where it starts, length)."""
+        self.tracks.retrack(act, geo, track, owned=True, base=base)
         self.set_changing(act, (direction, target))
         act.change_span = span
         act.record.lane_changes += 1
@@ -257,7 +260,7 @@ class LaneChanges:
             self.wait_for_gap(act.vid, direction, target_lane, pos, speed)
             return
         geo2, track = self.tracks.geometry(geo.edges[k_edge:], current, change=(pos, length))
-        self.begin_change(act, geo2, track, direction, target, (pos, length))
+        self.begin_change(act, geo2, track, act.route_base + k_edge, direction, target, (pos, length))
 
     def wait_for_gap(self, vid: str, direction: int, target_lane: str, pos: float, speed: float) -> None:
         """``vid`` has a lane change due and no room yet: it keeps behind the
@@ -423,7 +426,8 @@ class LaneChanges:
             lane_id = v.getLaneID(act.vid)
             speed = float(v.getSpeed(act.vid))
             pos = float(v.getLanePosition(act.vid))
-            rest = tuple(v.getRoute(act.vid))[max(int(v.getRouteIndex(act.vid)), 0) :]
+            base = max(int(v.getRouteIndex(act.vid)), 0)
+            rest = tuple(v.getRoute(act.vid))[base:]
         except Exception:
             return
         geo = act.geo
@@ -458,7 +462,7 @@ class LaneChanges:
             geo2, track = self.tracks.geometry(rest, current, change=(pos, length, target))
         except blendtrack.PathError:
             return  # the target lane does not go on along the route
-        self.begin_change(act, geo2, track, direction, target, (pos, length))
+        self.begin_change(act, geo2, track, base, direction, target, (pos, length))
         act.tactical = True
         self.counts["tactical_lane_changes"] += 1
 

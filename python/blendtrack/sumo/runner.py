@@ -60,6 +60,7 @@ import numpy as np
 import blendtrack
 from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection, loads_ok_marker, sumo_binary
+from blendtrack.sumo.faults import PlacementCheck, lane_position, repair, route_indices_near
 from blendtrack.sumo.junctions import YIELD_LOOKAHEAD_M, Junctions
 from blendtrack.sumo.lanechange import LANE_CHANGE_ROOM_M, LaneChanges
 from blendtrack.sumo.network import Network
@@ -136,7 +137,11 @@ class SumoRun:
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "placement_faults": 0, "route_index_repairs": 0}
+        self.placement = PlacementCheck(self.tracks.lanes.names, self.network)
+        #: Vehicles whose route index was repaired, by the lane they were on
+        #: then: moved by lane position, not (x, y), while on it.
+        self._by_lane: dict[str, int] = {}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         #: Moves by kind (see RouteFleet): speed only, nothing to send,
         #: (lane, position), (x, y, angle).
@@ -155,6 +160,7 @@ class SumoRun:
         self.vehicles.drop(vid, t, reason)
         self.lanes.drop(vid)
         self.stops.drop(vid)
+        self.placement.forget(vid)
 
     def _rebuild(self, act: Active) -> None:
         """The route changed (rerouting): a new track from where the vehicle is."""
@@ -216,6 +222,8 @@ class SumoRun:
             "moves_lane_position": self.moves["lane"],
             "moves_xy": self.moves["xy"],
             "reroutes": counts["reroutes"],
+            "placement_faults": counts["placement_faults"],
+            "route_index_repairs": counts["route_index_repairs"],
             "lane_changes_aborted": lanes["lane_changes_aborted"],
             "inside_junction_waits": self.junctions.counts["inside_junction_waits"],
             "courtesy_steps": lanes["courtesy_steps"],
@@ -299,6 +307,11 @@ class SumoRun:
         """Observe, then plan and step, then apply."""
         self._steps += 1
         self.conn.new_step()
+        for vid, what in self.placement.faults(list(self.active), self.conn.sumo.vehicle, self._route_indices):
+            # Not where blendtrack put it: SUMO's again, and counted (issue 18).
+            if vid in self.active and not (what == "route index" and self._repair_route_index(vid)):
+                self.counts["placement_faults"] += 1
+                self._drop(vid, t, "placement_fault")
         self.lanes.make_due()
         if self.opt.tactical_lane_changes and self.vehicles.order:
             self.lanes.tactical_changes(self.vehicles.order, self._steps)
@@ -439,6 +452,8 @@ class SumoRun:
         if self.stops.pending:
             self.stops.keep_speeds(ids, np.flatnonzero(moves == _HOLD).tolist(), speeds)
         lane_names = self.tracks.lanes.names
+        if self._by_lane:
+            moves = self._lane_not_xy(ids, moves, out["lane"])
         idx = np.flatnonzero(moves == _LANE)
         for i, lane, pos, sp in zip(idx.tolist(), out["lane"][idx].tolist(), out["lane_pos_m"][idx].tolist(), speeds[idx].tolist()):
             try:
@@ -462,6 +477,7 @@ class SumoRun:
         for i in np.flatnonzero(moves == _INVALID).tolist():
             # Unusable state (NaN): hand the vehicle back rather than move it anywhere.
             self._drop(ids[i], t, "invalid_state")
+        self.placement.note(ids, out, moves != _INVALID, (moves == _LANE) | (moves == _XY))
         for i in failed:
             self._move_failed(ids[i], acts[i], t)
         self._note(t, ids, acts, out)
@@ -486,6 +502,42 @@ class SumoRun:
         self.vehicles.note_trajectories(t, acts, out)
         if self.opt.trace:
             self.trace.add(t, ids, out, self.tracks.edges.names)
+
+    def _route_indices(self, vid: str) -> set[int]:
+        """SUMO's route indices that agree with where blendtrack has ``vid``."""
+        act = self.active[vid]
+        return route_indices_near(act.geo.piece_start_s, act.geo.piece_occurrence, act.route_base, self.fleet.s_front(act.slot))
+
+    def _repair_route_index(self, vid: str) -> bool:
+        """SUMO has ``vid`` on another occurrence of its edge: put it on
+        blendtrack's lane and position with ``moveTo`` (see
+        :mod:`~blendtrack.sumo.faults`); True when SUMO's index is right then."""
+        act = self.active[vid]
+        lane, pos = lane_position(act.geo, self.fleet.s_front(act.slot))
+        index = act.route_base + self.fleet.occurrence(act.slot)
+        try:
+            repaired = repair(self.conn.sumo.vehicle, vid, lane, pos, index, self._route_indices(vid))
+        except Exception:
+            return False
+        if repaired:
+            self.counts["route_index_repairs"] += 1
+            self.vehicles.read_position.add(vid)
+            # SUMO's moveToXY would match the same other lane again: on
+            # this lane the vehicle moves by lane position instead.
+            self._by_lane[vid] = self.tracks.lanes.id(lane)
+        return repaired
+
+    def _lane_not_xy(self, ids: list[str], moves: np.ndarray, lanes: np.ndarray) -> np.ndarray:
+        """``moves`` with the (x, y) moves of the vehicles repaired on their
+        present lane (``_by_lane``) made lane-position moves (``lane_pos_m``
+        is the same for both); a vehicle on another lane is let go."""
+        moves = moves.copy()
+        for i in np.flatnonzero(moves == _XY).tolist():
+            lane = self._by_lane.get(ids[i])
+            if lane is not None and lane == lanes[i]:
+                moves[i] = _LANE
+        self._by_lane = {vid: ln for vid, ln in self._by_lane.items() if (i := self.vehicles.index.get(vid)) is not None and lanes[i] == ln}
+        return moves
 
     def _move_failed(self, vid: str, act: Active, t: float) -> None:
         """SUMO rejected a move: a new route (rerouted since the last check)

@@ -69,6 +69,9 @@ class Active:
     own_track: int | None = None
     #: The track the vehicle drives (shared, or its own).
     track: int = -1
+    #: SUMO's route index of the first edge of the vehicle's track: its route
+    #: index where blendtrack has it is this plus ``RouteFleet.occurrence``.
+    route_base: int = 0
 
 
 class Tracks:
@@ -129,10 +132,11 @@ class Tracks:
                 stop_exit_m=[st[5] for st in stops],
                 stop_check_inside=[int(bool(network.junction_lanes(st[4])[1])) for st in stops],
                 lane_change=(
-                    (edge_ids.id(geo.edges[geo.pending_change[0]]), geo.pending_change[1])
+                    (edge_ids.id(geo.edges[geo.pending_change[0]]), geo.pending_change[1], geo.pending_change[0])
                     if geo.pending_change is not None
                     else None
                 ),
+                piece_occurrence=geo.piece_occurrence,
             )
             hit = (geo, track)
             if change is None:
@@ -169,11 +173,18 @@ class Tracks:
             del self._key[track]
             self.fleet.remove_route(track)
 
-    def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool) -> None:
-        """Puts ``act`` on ``track`` (``owned``: built for it alone); a track
-        it owned before goes (nobody else drives it), so a long run's lane
-        changes do not pile up tracks."""
-        self.fleet.retrack(act.slot, track)
+    def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool, base: int, route_index: int | None = None) -> None:
+        """Puts ``act`` on ``track`` (``owned``: built for it alone), whose
+        first edge is SUMO's route index ``base``, on the lap where the
+        vehicle is: its route index ``route_index``, by default the one
+        blendtrack has it at (a track that drives an edge more than once
+        passes its place once per lap). A track it owned before goes (nobody
+        else drives it), so a long run's lane changes do not pile up tracks."""
+        if route_index is None:
+            route_index = act.route_base + self.fleet.occurrence(act.slot)
+        occurrence = route_index - base
+        self.fleet.retrack(act.slot, track, occurrence=occurrence if occurrence >= 0 else None)
+        act.route_base = base
         old, act.own_track = act.own_track, (track if owned else None)
         left, act.track = act.track, track
         act.geo = geo
@@ -190,5 +201,6 @@ class Tracks:
         route = tuple(vehicle.getRoute(act.vid))
         idx = max(int(vehicle.getRouteIndex(act.vid)), 0)
         geo, track = self.geometry(route[idx:], max(int(vehicle.getLaneIndex(act.vid)), 0))
-        self.retrack(act, geo, track, owned=False)
+        # A new route: SUMO's index on it is the only one there is.
+        self.retrack(act, geo, track, owned=False, base=idx, route_index=idx)
         act.route_id = vehicle.getRouteID(act.vid)

@@ -89,14 +89,14 @@ class Controlled:
             track, cfg, veh,
             reach_m=reach, length_m=info["length"], min_gap_m=info["min_gap"],
             x=x - reach * math.cos(theta), y=y - reach * math.sin(theta), theta=theta, v=float(v.getSpeed(vid)),
-            name=vid,
+            name=vid, occurrence=0,
         )
         rec = VehicleRecord(vid=vid, vtype=vtype, depart_s=t)
         self.taken += 1
         if self.opt.keep_records:
             self.records.append(rec)
         self.tracks.enter(track)
-        act = Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec, track=track)
+        act = Active(vid=vid, slot=slot, geo=geo, route_id=v.getRouteID(vid), record=rec, track=track, route_base=idx)
         if len(self.trajectories) + len(self.tracing) < self.opt.keep_trajectories or self.opt.keep_trajectories < 0:
             act.trajectory = []
             self.tracing[vid] = act

@@ -49,6 +49,25 @@ fn u32_of(name: &str, i: usize, x: i64) -> PyResult<u32> {
     u32::try_from(x).map_err(|_| input_error(format!("{name}[{i}] = {x}: must be in [0, 2^32)")))
 }
 
+/// `add_route`'s `lane_change`: (edge, target lane index) or (edge, target
+/// lane index, occurrence of the edge).
+fn lane_change_due(items: &[i64]) -> PyResult<LaneChangeDue> {
+    let (&[e, t] | &[e, t, _]) = items else {
+        return Err(input_error(format!(
+            "lane_change has {} items, expected (edge, target lane index[, occurrence])",
+            items.len()
+        )));
+    };
+    Ok(LaneChangeDue {
+        edge: u32_of("lane_change edge", 0, e)?,
+        target_index: u32_of("lane_change target", 1, t)?,
+        occurrence: match items {
+            &[_, _, k] => Some(u32_of("lane_change occurrence", 2, k)?),
+            _ => None,
+        },
+    })
+}
+
 /// A vehicle's statistics as a dict, every entry the traffic crate names
 /// (raw sums and maxima, finished means and RMS, counts), built generically.
 fn stats_dict<'py>(py: Python<'py>, s: &DriveStats) -> PyResult<Bound<'py, PyDict>> {
@@ -141,7 +160,7 @@ impl RouteFleet {
     }
 
     /// Registers a track with its lane pieces and stop lines; returns its id.
-    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_offset_m, piece_lane_length_m, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, piece_lane_pos_m = None, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, stop_check_inside = None, lane_change = None))]
+    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_offset_m, piece_lane_length_m, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, piece_lane_pos_m = None, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, stop_check_inside = None, lane_change = None, piece_occurrence = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_route(
         &mut self,
@@ -165,7 +184,8 @@ impl RouteFleet {
         stop_via: Option<I64In<'_>>,
         stop_exit_m: Option<F64In<'_>>,
         stop_check_inside: Option<I64In<'_>>,
-        lane_change: Option<(i64, i64)>,
+        lane_change: Option<Vec<i64>>,
+        piece_occurrence: Option<I64In<'_>>,
     ) -> PyResult<usize> {
         let starts = vec_of(&piece_start_m);
         let n = starts.len();
@@ -180,7 +200,12 @@ impl RouteFleet {
         let lane = vec_of(&piece_lane);
         let edge = vec_of(&piece_edge);
         let index = vec_of(&piece_lane_index);
+        let occurrence = piece_occurrence
+            .as_ref()
+            .map(vec_of)
+            .unwrap_or_else(|| vec![0; n]);
         for (name, got) in [
+            ("piece_occurrence", occurrence.len()),
             ("piece_scale", scale.len()),
             ("piece_offset_m", offset.len()),
             ("piece_lane_length_m", lane_length.len()),
@@ -204,6 +229,7 @@ impl RouteFleet {
                 lane: u32_of("piece_lane", i, lane[i])?,
                 edge: u32_of("piece_edge", i, edge[i])?,
                 lane_index: u32_of("piece_lane_index", i, index[i])?,
+                occurrence: u32_of("piece_occurrence", i, occurrence[i])?,
             });
         }
         let s = stop_s_m.as_ref().map(vec_of).unwrap_or_default();
@@ -246,13 +272,7 @@ impl RouteFleet {
                 check_inside: check_inside[i] != 0,
             });
         }
-        let lane_change = match lane_change {
-            Some((e, t)) => Some(LaneChangeDue {
-                edge: u32_of("lane_change edge", 0, e)?,
-                target_index: u32_of("lane_change target", 1, t)?,
-            }),
-            None => None,
-        };
+        let lane_change = lane_change.as_deref().map(lane_change_due).transpose()?;
         let route = Route::new(pieces, stops, length_m, lane_change).map_err(traffic_error)?;
         let cfg = config.map(|c| c.to_core()).transpose()?.unwrap_or_default();
         let p = path.inner.clone();
@@ -264,7 +284,10 @@ impl RouteFleet {
     /// Adds a vehicle (rear-axle state) on a track; returns its slot.
     /// `name` (the simulator's id, unique among the vehicles here) lets
     /// `plan_sumo` recognise it as a leader.
-    #[pyo3(signature = (track_id, config, vehicle, *, reach_m, length_m, min_gap_m, x, y, theta, v, delta = 0.0, name = None))]
+    /// `occurrence`: which time the track drives the vehicle's edge (SUMO's
+    /// route index less that of the track's first edge); on a track that
+    /// drives an edge more than once the vehicle is placed on that lap.
+    #[pyo3(signature = (track_id, config, vehicle, *, reach_m, length_m, min_gap_m, x, y, theta, v, delta = 0.0, name = None, occurrence = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_vehicle(
         &mut self,
@@ -280,6 +303,7 @@ impl RouteFleet {
         v: f64,
         delta: f64,
         name: Option<String>,
+        occurrence: Option<i64>,
     ) -> PyResult<usize> {
         if let Some(n) = &name {
             if self.slot_of.contains_key(n) {
@@ -303,9 +327,10 @@ impl RouteFleet {
             v_mps: v,
             delta_rad: delta,
         };
+        let occurrence = occurrence.map(|k| u32_of("occurrence", 0, k)).transpose()?;
         let slot = self
             .inner
-            .add_vehicle(track_id, cfg, params, body, state)
+            .add_vehicle_at(track_id, cfg, params, body, state, occurrence)
             .map_err(traffic_error)?;
         if self.name_of.len() <= slot {
             self.name_of.resize(slot + 1, None);
@@ -318,8 +343,20 @@ impl RouteFleet {
     }
 
     /// Moves a vehicle to another track; its state and statistics stay.
-    fn retrack(&mut self, slot: i64, track_id: i64) -> PyResult<()> {
-        self.inner.retrack(slot, track_id).map_err(traffic_error)
+    /// `occurrence` as for `add_vehicle`, on the new track.
+    #[pyo3(signature = (slot, track_id, occurrence = None))]
+    fn retrack(&mut self, slot: i64, track_id: i64, occurrence: Option<i64>) -> PyResult<()> {
+        let occurrence = occurrence.map(|k| u32_of("occurrence", 0, k)).transpose()?;
+        self.inner
+            .retrack_at(slot, track_id, occurrence)
+            .map_err(traffic_error)
+    }
+
+    /// Which time the track drives the edge of the vehicle's front (see
+    /// `add_vehicle`'s `occurrence`): SUMO's route index of the vehicle,
+    /// less that of the track's first edge, where blendtrack has it.
+    fn occurrence(&self, slot: i64) -> PyResult<u32> {
+        self.inner.occurrence(slot).map_err(traffic_error)
     }
 
     /// Removes a track no vehicle drives any more (its memory is freed; a

@@ -304,18 +304,30 @@ impl RouteFleet {
             .expect("every track is added with a route"))
     }
 
+    /// The arc length of the front of a vehicle at `state` on a track. On a
+    /// track that drives an edge more than once it is searched among the
+    /// pieces of `occurrence` only (when given and on the track): the other
+    /// laps pass the same place. Elsewhere it is the nearest point of the
+    /// whole track. Also says whether the search was so limited.
     fn front_arc(
         &self,
         track_id: i64,
         state: &VehicleState,
         reach_m: f64,
-    ) -> Result<f64, TrafficError> {
+        occurrence: Option<u32>,
+    ) -> Result<(f64, bool), TrafficError> {
         let path = &self.fleet.track(track_id)?.path;
+        let route = self.route_of_track(track_id)?;
         let front = Point2::new(
             state.x_m + reach_m * state.theta_rad.cos(),
             state.y_m + reach_m * state.theta_rad.sin(),
         );
-        Ok(path.project(&front).s)
+        if route.revisits_an_edge() {
+            if let Some((from, to)) = occurrence.and_then(|k| route.occurrence_span(k)) {
+                return Ok((path.project_between(&front, from, to).s, true));
+            }
+        }
+        Ok((path.project(&front).s, false))
     }
 
     /// Adds a vehicle at `state` (its rear axle) on a track; returns its slot.
@@ -326,6 +338,22 @@ impl RouteFleet {
         params: Option<VehicleParams>,
         body: Body,
         state: VehicleState,
+    ) -> Result<usize, TrafficError> {
+        self.add_vehicle_at(track_id, config, params, body, state, None)
+    }
+
+    /// [`Self::add_vehicle`] on occurrence `occurrence` of its edge (see
+    /// [`Piece::occurrence`]): on a track that drives the edge more than
+    /// once, the vehicle is placed on that lap, and its controller's first
+    /// projections start there.
+    pub fn add_vehicle_at(
+        &mut self,
+        track_id: i64,
+        config: Option<ControllerConfig>,
+        params: Option<VehicleParams>,
+        body: Body,
+        state: VehicleState,
+        occurrence: Option<u32>,
     ) -> Result<usize, TrafficError> {
         for (name, value) in [
             ("x", state.x_m),
@@ -346,8 +374,12 @@ impl RouteFleet {
             }
         }
         let route = self.route_of_track(track_id)?;
-        let s_front_m = self.front_arc(track_id, &state, body.reach_m)?;
+        let (s_front_m, on_lap) = self.front_arc(track_id, &state, body.reach_m, occurrence)?;
         let slot = self.fleet.add_vehicle(track_id, config, params)?;
+        if on_lap {
+            self.fleet
+                .seed_vehicle_hints(slot as i64, s_front_m - body.reach_m)?;
+        }
         if self.driven.len() <= slot {
             self.driven.resize(slot + 1, None);
         }
@@ -379,10 +411,25 @@ impl RouteFleet {
     /// Moves a vehicle to another track (a lane change, a new route); its
     /// state and statistics stay, its stop lines start over, its halt goes.
     pub fn retrack(&mut self, slot: i64, track_id: i64) -> Result<(), TrafficError> {
+        self.retrack_at(slot, track_id, None)
+    }
+
+    /// [`Self::retrack`] onto occurrence `occurrence` of the vehicle's edge
+    /// on the new track (see [`Self::add_vehicle_at`]).
+    pub fn retrack_at(
+        &mut self,
+        slot: i64,
+        track_id: i64,
+        occurrence: Option<u32>,
+    ) -> Result<(), TrafficError> {
         let route = self.route_of_track(track_id)?;
         let d = self.driven(slot)?;
-        let s_front_m = self.front_arc(track_id, &d.state, d.body.reach_m)?;
+        let reach_m = d.body.reach_m;
+        let (s_front_m, on_lap) = self.front_arc(track_id, &d.state, reach_m, occurrence)?;
         self.fleet.set_vehicle_track(slot, track_id)?;
+        if on_lap {
+            self.fleet.seed_vehicle_hints(slot, s_front_m - reach_m)?;
+        }
         let d = self.driven[slot as usize].as_mut().expect("checked above");
         d.route = route;
         d.s_front_m = s_front_m;
@@ -413,6 +460,13 @@ impl RouteFleet {
     /// Arc length of the vehicle's front bumper on its track (m).
     pub fn s_front(&self, slot: i64) -> Result<f64, TrafficError> {
         Ok(self.driven(slot)?.s_front_m)
+    }
+    /// The occurrence (see [`Piece::occurrence`]) of the piece holding the
+    /// vehicle's front: the simulator's route index, less that of the
+    /// track's first edge, where blendtrack has the vehicle.
+    pub fn occurrence(&self, slot: i64) -> Result<u32, TrafficError> {
+        let d = self.driven(slot)?;
+        Ok(d.route.occurrence_at(d.s_front_m))
     }
     /// The stop line ahead of the vehicle (the one its plan looked at).
     pub fn next_stop(&self, slot: i64) -> Result<Option<StopLine>, TrafficError> {

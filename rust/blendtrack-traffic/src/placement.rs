@@ -69,7 +69,12 @@ pub(crate) fn glide_distance(
         }
         j -= 1;
         let q = &pieces[j];
-        if q.lane == pieces[j + 1].lane || !q.offset_m.is_finite() {
+        // Not back over a whole edge: on a track that drives the lane
+        // again, that could be another lap's piece of it.
+        if q.lane == pieces[j + 1].lane
+            || !q.offset_m.is_finite()
+            || q.occurrence + 1 < pieces[k].occurrence
+        {
             return None;
         }
         if q.lane == lane {

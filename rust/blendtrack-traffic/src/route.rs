@@ -27,6 +27,12 @@ pub struct Piece {
     pub lane: u32,
     pub edge: u32,
     pub lane_index: u32,
+    /// Which of the track's edges, in order, the piece is on (a junction
+    /// lane: the edge before it): SUMO's route index counted from the
+    /// track's first edge. A route that drives an edge more than once (a
+    /// loop, laps, a bus line that comes back) has pieces of one lane with
+    /// different occurrences; a position on that lane means one of them.
+    pub occurrence: u32,
 }
 
 /// A junction entry along a route's track.
@@ -55,6 +61,9 @@ pub struct StopLine {
 pub struct LaneChangeDue {
     pub edge: u32,
     pub target_index: u32,
+    /// The occurrence of the edge (see [`Piece::occurrence`]) where the
+    /// change is due; None: wherever the track is on the edge.
+    pub occurrence: Option<u32>,
 }
 
 /// Lanes and stop lines along a track (see the module docs).
@@ -64,6 +73,8 @@ pub struct Route {
     pub(crate) stops: Vec<StopLine>,
     pub(crate) length_m: f64,
     pub(crate) lane_change: Option<LaneChangeDue>,
+    /// Some edge has pieces of two occurrences (see [`Piece::occurrence`]).
+    pub(crate) revisits: bool,
 }
 
 impl Route {
@@ -125,6 +136,13 @@ impl Route {
                     p.offset_m
                 ));
             }
+            if i > 0 && p.occurrence < pieces[i - 1].occurrence {
+                return bad(format!(
+                    "piece {i} has occurrence {} after {}: occurrences must not decrease",
+                    p.occurrence,
+                    pieces[i - 1].occurrence
+                ));
+            }
             if !(p.speed_mps > 0.0) {
                 return bad(format!(
                     "piece {i} has speed limit {} m/s: must be > 0",
@@ -143,12 +161,40 @@ impl Route {
                 return bad(format!("stop line {i} has a NaN exit"));
             }
         }
+        let mut first_seen = std::collections::HashMap::new();
+        let revisits = pieces
+            .iter()
+            .any(|p| *first_seen.entry(p.edge).or_insert(p.occurrence) != p.occurrence);
         Ok(Route {
             pieces,
             stops,
             length_m,
             lane_change,
+            revisits,
         })
+    }
+
+    /// The arc lengths [from, to) of the pieces of occurrence `k` (its
+    /// edge's lanes and the junction lanes after them); None when no piece
+    /// has it.
+    pub fn occurrence_span(&self, k: u32) -> Option<(f64, f64)> {
+        let first = self.pieces.partition_point(|p| p.occurrence < k);
+        if self.pieces.get(first)?.occurrence != k {
+            return None;
+        }
+        let end = self.pieces.partition_point(|p| p.occurrence <= k);
+        let to = self.pieces.get(end).map_or(self.length_m, |p| p.start_m);
+        Some((self.pieces[first].start_m, to))
+    }
+
+    /// Does the track drive some edge more than once?
+    pub fn revisits_an_edge(&self) -> bool {
+        self.revisits
+    }
+
+    /// The occurrence of the piece holding arc length `s`.
+    pub fn occurrence_at(&self, s: f64) -> u32 {
+        self.pieces[self.piece_at(s)].occurrence
     }
 
     /// Index of the piece holding arc length `s` (clamped to the pieces).
@@ -186,6 +232,7 @@ mod tests {
             lane: 0,
             edge: 0,
             lane_index: 0,
+            occurrence: 0,
         };
         assert!(matches!(
             Route::new(vec![], vec![], 10.0, None),
@@ -205,6 +252,68 @@ mod tests {
             ],
             [0, 0, 2, 3, 3]
         );
+    }
+
+    #[test]
+    fn a_track_that_drives_an_edge_three_times_has_three_spans_of_it() {
+        let (path, route) = laps();
+        let lap = path.length() / 3.0;
+        assert!(route.revisits_an_edge());
+        assert!(!road(None, true).1.revisits_an_edge());
+        for k in 0..3 {
+            let (from, to) = route.occurrence_span(k).unwrap();
+            assert!(
+                (from - k as f64 * lap).abs() < 1e-9 && (to - (k + 1) as f64 * lap).abs() < 1e-9
+            );
+            assert_eq!(route.occurrence_at(from + 1.0), k);
+        }
+        assert_eq!(route.occurrence_span(3), None);
+        // On the road, the junction lane belongs to the edge before it.
+        assert_eq!(road(None, true).1.occurrence_span(0), Some((0.0, 210.0)));
+        let mut pieces = route.pieces.clone();
+        pieces[2].occurrence = 0;
+        let e = Route::new(pieces, vec![], path.length(), None).unwrap_err();
+        assert!(
+            e.to_string().contains("piece 2 has occurrence 0 after 1"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn a_vehicle_placed_on_a_lap_stays_on_that_lap() {
+        let (mut f, t) = fleet_on(laps());
+        let lap = f.route_of_track(t).unwrap().length_m / 3.0;
+        for k in 0..3u32 {
+            let a = f
+                .add_vehicle_at(t, None, None, body(), on_circle(0.5, 10.0), Some(k))
+                .unwrap() as i64;
+            for _ in 0..100 {
+                let out = step(&mut f, &[a], false).1;
+                // On the lap it was put on (10 s at 10-15 m/s is 100-150 m:
+                // less than the 314 m lap), and on its track, not a lap away.
+                assert_eq!(f.occurrence(a).unwrap(), k);
+                assert!(
+                    out.lateral_error_m[0].abs() < 0.2,
+                    "{}",
+                    out.lateral_error_m[0]
+                );
+                assert!(out.s_rear_m[0] > k as f64 * lap && out.s_rear_m[0] < (k + 1) as f64 * lap);
+            }
+            // Retracked onto the same track, on the next lap: there it goes on.
+            if k < 2 {
+                f.retrack_at(a, t, Some(k + 1)).unwrap();
+                let s = f.s_front(a).unwrap();
+                assert!(s > (k + 1) as f64 * lap && s < (k + 2) as f64 * lap, "{s}");
+                let out = step(&mut f, &[a], false).1;
+                assert_eq!(f.occurrence(a).unwrap(), k + 1);
+                assert!(
+                    out.s_rear_m[0] > (k + 1) as f64 * lap,
+                    "{}",
+                    out.s_rear_m[0]
+                );
+            }
+            f.remove_vehicle(a).unwrap();
+        }
     }
 
     #[test]

@@ -260,7 +260,9 @@ impl RouteFleet {
                 d.stats.red_light_violations += 1;
             }
             if let Some(lc) = d.route.lane_change {
-                due = piece.edge == lc.edge && piece.lane_index != lc.target_index;
+                due = piece.edge == lc.edge
+                    && piece.lane_index != lc.target_index
+                    && lc.occurrence.map_or(true, |k| k == piece.occurrence);
             }
             let step = control_record(
                 out,

@@ -10,22 +10,24 @@ pub(crate) const DT: f64 = 0.1;
 /// junction lane 11 (not plain) to 210 m, then lane 12 (plain, scale 1.01).
 pub(crate) fn road(signal: Option<(usize, usize)>, major: bool) -> (Path, Route) {
     let path = Path::straight(600.0, 1.0).unwrap();
-    let piece = |start_m: f64, plain: bool, lane, edge, scale: f64, lane_length_m| Piece {
-        start_m,
-        lane_pos_start_m: 0.0,
-        scale,
-        lane_length_m,
-        offset_m: if plain { 0.0 } else { f64::INFINITY },
-        speed_mps: 20.0,
-        lane,
-        edge,
-        lane_index: 0,
-    };
+    let piece =
+        |start_m: f64, plain: bool, lane, edge, scale: f64, lane_length_m, occurrence| Piece {
+            start_m,
+            lane_pos_start_m: 0.0,
+            scale,
+            lane_length_m,
+            offset_m: if plain { 0.0 } else { f64::INFINITY },
+            speed_mps: 20.0,
+            lane,
+            edge,
+            lane_index: 0,
+            occurrence,
+        };
     let route = Route::new(
         vec![
-            piece(0.0, true, 10, 1, 1.0, 200.0),
-            piece(200.0, false, 11, 2, 1.0, 10.0),
-            piece(210.0, true, 12, 3, 1.01, 390.0 * 1.01),
+            piece(0.0, true, 10, 1, 1.0, 200.0, 0),
+            piece(200.0, false, 11, 2, 1.0, 10.0, 0),
+            piece(210.0, true, 12, 3, 1.01, 390.0 * 1.01, 1),
         ],
         vec![StopLine {
             s_m: 200.0,
@@ -186,4 +188,48 @@ pub(crate) fn front_lane_pos(f: &RouteFleet, slot: i64) -> (u32, f64) {
     let d = f.driven(slot).unwrap();
     let p = d.route.pieces[d.route.piece_at(sf)];
     (p.lane, p.lane_pos_start_m + (sf - p.start_m) * p.scale)
+}
+
+/// A circle of radius `LAP_RADIUS_M` driven three times (an open path of
+/// three laps, one lane piece per lap: lane 20 on edge 5, occurrences 0, 1
+/// and 2): every place on it is on the track three times.
+pub(crate) const LAP_RADIUS_M: f64 = 50.0;
+pub(crate) fn laps() -> (Path, Route) {
+    let n = 400;
+    let pts: Vec<[f64; 2]> = (0..=3 * n)
+        .map(|i| {
+            let a = std::f64::consts::TAU * i as f64 / n as f64;
+            [LAP_RADIUS_M * a.cos(), LAP_RADIUS_M * a.sin()]
+        })
+        .collect();
+    let path = Path::new(&pts, None, false).unwrap();
+    let lap = path.length() / 3.0;
+    let pieces = (0..3)
+        .map(|k| Piece {
+            start_m: k as f64 * lap,
+            lane_pos_start_m: 0.0,
+            scale: 1.0,
+            lane_length_m: lap,
+            offset_m: 0.0,
+            speed_mps: 15.0,
+            lane: 20,
+            edge: 5,
+            lane_index: 0,
+            occurrence: k,
+        })
+        .collect();
+    let route = Route::new(pieces, vec![], path.length(), None).unwrap();
+    (path, route)
+}
+
+/// A vehicle's rear axle on the circle of [`laps`] at angle `a` (rad),
+/// driving counter-clockwise at `v`.
+pub(crate) fn on_circle(a: f64, v: f64) -> VehicleState {
+    VehicleState {
+        x_m: LAP_RADIUS_M * a.cos(),
+        y_m: LAP_RADIUS_M * a.sin(),
+        theta_rad: a + std::f64::consts::FRAC_PI_2,
+        v_mps: v,
+        delta_rad: 0.0,
+    }
 }

@@ -134,6 +134,18 @@ impl Controller {
         self.last_rear = None;
     }
 
+    /// Starts the projections of the next step from the rear axle at arc
+    /// length `s_rear_m` (and the front axle a wheelbase on) instead of a
+    /// search of the whole path: on a track that passes the same place more
+    /// than once (laps), the whole-path search may pick another lap.
+    pub fn seed_hints(&mut self, s_rear_m: f64) {
+        self.reset();
+        if s_rear_m.is_finite() {
+            self.hint_rear = Some(s_rear_m);
+            self.hint_front = Some(s_rear_m + self.wheelbase_m);
+        }
+    }
+
     /// One step with the configured blend factor.
     pub fn step(
         &mut self,

@@ -392,6 +392,18 @@ impl Fleet {
         Ok(())
     }
 
+    /// Starts a vehicle's next projections from its rear axle at arc length
+    /// `s_rear_m` of its track (see [`Controller::seed_hints`]).
+    pub fn seed_vehicle_hints(&mut self, slot: i64, s_rear_m: f64) -> Result<(), FleetError> {
+        let i = self.index(slot)?;
+        self.slots[i]
+            .as_mut()
+            .expect("index() checked the slot is in use")
+            .controller
+            .seed_hints(s_rear_m);
+        Ok(())
+    }
+
     /// Forgets a vehicle's projection hints (after a teleport: the next step
     /// searches its whole track).
     pub fn reset_vehicle(&mut self, slot: i64) -> Result<(), FleetError> {

@@ -723,6 +723,30 @@ impl Path {
         self.make_projection(p, best.1, best.2, best.0)
     }
 
+    /// The nearest point among the segments that overlap arc lengths
+    /// `[s_from, s_to]` (a scan of those segments): the foot point on one
+    /// stretch of a track that passes the same place more than once (laps
+    /// of a loop), where the full search could answer with another lap.
+    pub fn project_between(&self, p: &Point2<f64>, s_from: f64, s_to: f64) -> Projection {
+        let n_seg = self.seg_len.len();
+        let first = self
+            .s
+            .partition_point(|&s| s <= s_from)
+            .saturating_sub(1)
+            .min(n_seg - 1);
+        let mut best = (f64::INFINITY, first, 0.0f64);
+        for k in first..n_seg {
+            if k > first && self.s[k] > s_to {
+                break;
+            }
+            let (d2, t) = self.seg_dist2(k, p);
+            if d2 < best.0 {
+                best = (d2, k, t);
+            }
+        }
+        self.make_projection(p, best.1, best.2, best.0)
+    }
+
     /// Windowed projection around the hint `hint_s` (see module docs). A
     /// non-finite hint falls back to the full search.
     pub fn project_hinted(&self, p: &Point2<f64>, hint_s: f64) -> Projection {

@@ -231,3 +231,27 @@ fn track_widths_drive_the_borders() {
     );
     assert!(((margin.left()[0] - c).norm() - 6.487).abs() < 1e-9);
 }
+
+#[test]
+fn a_projection_between_two_arc_lengths_keeps_to_that_stretch() {
+    // The same straight 100 m driven out and, 3 m to the left, back: a
+    // point 1 m left of the way out is nearer to it (1 m) than to the way
+    // back (2 m), and on the way back when only that stretch is searched.
+    let mut pts: Vec<[f64; 2]> = (0..=100).map(|i| [i as f64, 0.0]).collect();
+    pts.extend((0..=100).rev().map(|i| [i as f64, 3.0]));
+    let p = Path::new(&pts, None, false).unwrap();
+    let q = Point2::new(40.0, 1.0);
+    let whole = p.project_between(&q, 0.0, p.length());
+    assert!((whole.s - 40.0).abs() < 1e-9, "{whole:?}");
+    assert_eq!(whole.s, p.project_brute_force(&q).s);
+    let back = p.project_between(&q, 150.0, p.length());
+    // The way back starts at 103 m (100 m out, 3 m across); x = 40 is 60 m
+    // on, the point 2 m to its left (heading west, left is south).
+    assert!(
+        (back.s - 163.0).abs() < 1e-9 && (back.lateral_m - 2.0).abs() < 1e-9,
+        "{back:?}"
+    );
+    // A stretch inside one segment still finds that segment's foot point.
+    let short = p.project_between(&q, 40.2, 40.4);
+    assert!((short.s - 40.0).abs() < 1e-9, "{short:?}");
+}

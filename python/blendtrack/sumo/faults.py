@@ -1,0 +1,164 @@
+"""Placement faults (issue 18): a controlled vehicle that SUMO has somewhere
+else than blendtrack put it, or that is off its lane, is handed back to SUMO
+and counted, never driven on silently.
+
+After each SUMO step SUMO's front bumper point of every controlled vehicle
+(``vehicle.getPosition``) is compared with where blendtrack's last step put
+the front (``x_front_m``, ``y_front_m``: SUMO's own movement over its step
+carries a speed-only or (lane, position) move there, an (x, y) move is that
+point). Normally they differ by centimetres: a speed-only move lands within
+``HOLD_SPEED_MPS * dt`` along the lane, a SUMO that lags is placed again once
+0.5 m behind, and SUMO keeps a vehicle on its lane's centreline where
+blendtrack's is off it by its lateral error (at most the lane's half width
+without a fault). ``JUMP_M`` is far above all of that and far below what a
+wrong lap (a lap's length) or another client's move would make.
+
+A lateral error (of the control point, from the step's outputs) larger than
+the width of the lane the vehicle is on is a fault too: the vehicle is then
+off its lane, tracking a track it is not on.
+
+So is a route index SUMO has for a vehicle that blendtrack placed (by lane
+position or by (x, y)) other than the one of the edge blendtrack has it on:
+SUMO would then drive it on as if on another lap (``moveToXY`` with
+keepRoute matches the nearest lane along the whole route, and where a later
+edge of the route passes close to the point, it can pick that one). Only
+placed vehicles are asked: SUMO's own movement keeps the index right. Near a
+lane's end the two may differ for a step: blendtrack's lane pieces meet
+where its smoothed track (a Gaussian of 1.5 m) comes back to the lanes, a
+few metres from SUMO's lane ends at a sharp turn (3.2 m measured at a
+right-angle one), so any index of the pieces within ``ROUTE_INDEX_SLACK_M``
+of the front agrees; another lap is a whole lap away.
+
+A wrong route index is repaired first where SUMO allows (``repair``):
+``moveTo`` onto the lane blendtrack has the vehicle on, which SUMO looks up
+along the route from its (wrong) index on (then from the route's start).
+From an index behind the right one that finds the next occurrence of the
+edge; while that is still an earlier one, a ``moveTo`` onto the edge after
+it and the lane again go one occurrence on. Only a vehicle still wrong after
+that (SUMO ahead, where ``moveTo`` cannot go back) is a fault.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+#: SUMO's front more than this from blendtrack's (m) is a jump.
+JUMP_M = 5.0
+#: How far (m) along the track the edge of SUMO's route index may be from
+#: blendtrack's front (see the module docs).
+ROUTE_INDEX_SLACK_M = 10.0
+
+
+def lane_position(geo: Any, s: float) -> tuple[str, float]:
+    """SUMO's (lane, lane position) of arc length ``s`` on a track (its
+    ``RouteGeometry``)."""
+    k = max(int(np.searchsorted(geo.piece_start_s, s, side="right")) - 1, 0)
+    pos = float(geo.piece_lane_pos[k] + (s - geo.piece_start_s[k]) * geo.piece_scale[k])
+    return geo.piece_lane[k], min(max(pos, 0.0), float(geo.piece_lane_length[k]))
+
+
+def repair(vehicle: Any, vid: str, lane: str, pos: float, index: int, ok: set[int]) -> bool:
+    """Puts ``vid`` (``vehicle``: SUMO's vehicle domain) on ``lane`` at
+    ``pos`` with SUMO's route index ``index`` (any of ``ok`` will do), with
+    ``moveTo`` alone (see the module docs); True when SUMO's index is one of
+    ``ok`` then."""
+    route = vehicle.getRoute(vid)
+    for _ in range(len(route)):
+        vehicle.moveTo(vid, lane, pos)
+        at = int(vehicle.getRouteIndex(vid))
+        if at in ok:
+            return True
+        if at >= index or at + 1 >= len(route):
+            return False
+        # An earlier occurrence of the edge: one edge on, then look again.
+        vehicle.moveTo(vid, f"{route[at + 1]}_0", 0.0)
+    return False
+
+
+def route_indices_near(piece_start_s: np.ndarray, piece_occurrence: list[int], base: int, s: float) -> set[int]:
+    """SUMO's route indices of the pieces within ``ROUTE_INDEX_SLACK_M`` of
+    arc length ``s`` on a track whose first edge is route index ``base``."""
+    lo, hi = np.searchsorted(piece_start_s, [s - ROUTE_INDEX_SLACK_M, s + ROUTE_INDEX_SLACK_M], side="right")
+    return {base + piece_occurrence[k] for k in range(max(int(lo) - 1, 0), max(int(hi), 1))}
+
+
+class PlacementCheck:
+    """Where blendtrack put each controlled vehicle's front last step, and
+    the check of SUMO's against it."""
+
+    def __init__(self, lane_names: list[str], network: Any) -> None:
+        #: The interned lane names (``Tracks.lanes.names``, grows) and the
+        #: ``Network`` (read once a width is asked for: SUMO checks it first).
+        self._names = lane_names
+        self._network = network
+        self._widths = np.zeros(0)
+        #: vid -> (x, y) of the front blendtrack put it at.
+        self._front: dict[str, tuple[float, float]] = {}
+        #: Vehicles found off their lane by last step's outputs.
+        self._off_lane: list[str] = []
+        #: Vehicles placed last step (by lane position or by (x, y)).
+        self._placed: list[str] = []
+
+    def lane_widths(self, lanes: np.ndarray) -> np.ndarray:
+        """The widths (m) of the interned lanes ``lanes``."""
+        if len(self._widths) < len(self._names):
+            more = [self._width(name) for name in self._names[len(self._widths) :]]
+            self._widths = np.concatenate([self._widths, np.array(more)])
+        return self._widths[lanes]
+
+    def _width(self, name: str) -> float:
+        """A lane's width; +inf for a name that is no lane of the network
+        (the empty lane of a vehicle SUMO has off the road)."""
+        try:
+            return float(self._network.net().getLane(name).getWidth())
+        except (KeyError, ValueError):
+            return math.inf
+
+    def note(self, ids: list[str], out: dict[str, np.ndarray], usable: np.ndarray, placed: np.ndarray) -> None:
+        """After a step: the fronts blendtrack put the vehicles ``ids`` at
+        (``out``: ``RouteFleet.step``'s; ``usable``: the ones moved;
+        ``placed``: the ones placed by lane position or (x, y)), and which
+        of them are off their lane."""
+        self._placed = [ids[i] for i in np.flatnonzero(placed).tolist()]
+        front = self._front
+        for i, x, y in zip(np.flatnonzero(usable).tolist(), out["x_front_m"][usable].tolist(), out["y_front_m"][usable].tolist()):
+            front[ids[i]] = (x, y)
+        off = usable & (np.abs(out["lateral_error_m"]) > self.lane_widths(out["lane"]))
+        self._off_lane = [ids[i] for i in np.flatnonzero(off).tolist()]
+
+    def forget(self, vid: str) -> None:
+        self._front.pop(vid, None)
+
+    def faults(self, ids: list[str], vehicle: Any, route_indices: Any) -> list[tuple[str, str]]:
+        """(vehicle, what) of the vehicles ``ids`` with a placement fault now:
+        SUMO has the front more than JUMP_M from blendtrack's, last step left
+        it off its lane, or (for the ones placed) SUMO's route index is not
+        one of ``route_indices(vid)``. ``vehicle``: SUMO's vehicle domain. A
+        vehicle SUMO no longer knows is left to the caller's check for
+        vanished ones."""
+        found = [(vid, "off its lane") for vid in self._off_lane]
+        self._off_lane = []
+        for vid in self._placed:
+            try:
+                if int(vehicle.getRouteIndex(vid)) not in route_indices(vid):
+                    found.append((vid, "route index"))
+            except Exception:
+                continue
+        self._placed = []
+        seen = {vid for vid, _ in found}
+        get_position = vehicle.getPosition
+        front = self._front
+        for vid in ids:
+            mine = front.get(vid)
+            if mine is None or vid in seen:
+                continue
+            try:
+                x, y = get_position(vid)
+            except Exception:
+                continue
+            if math.hypot(x - mine[0], y - mine[1]) > JUMP_M:
+                found.append((vid, "jump"))
+        return found
