@@ -126,7 +126,9 @@ class PlacementCheck:
         front = self._front
         for i, x, y in zip(np.flatnonzero(usable).tolist(), out["x_front_m"][usable].tolist(), out["y_front_m"][usable].tolist()):
             front[ids[i]] = (x, y)
-        off = usable & (np.abs(out["lateral_error_m"]) > self.lane_widths(out["lane"]))
+        # Past the route's end the track has ended: the "lateral error" is
+        # the distance past its last point, and SUMO is about to let it arrive.
+        off = usable & ~out["past_route_end"] & (np.abs(out["lateral_error_m"]) > self.lane_widths(out["lane"]))
         self._off_lane = [ids[i] for i in np.flatnonzero(off).tolist()]
 
     def forget(self, vid: str) -> None:

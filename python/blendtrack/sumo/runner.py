@@ -307,7 +307,11 @@ class SumoRun:
         """Observe, then plan and step, then apply."""
         self._steps += 1
         self.conn.new_step()
-        for vid, what in self.placement.faults(list(self.active), self.conn.sumo.vehicle, self._route_indices):
+        checked = list(self.active)
+        if self.stops.pending:
+            dwelling = self.stops.dwelling()
+            checked = [vid for vid in checked if vid not in dwelling]
+        for vid, what in self.placement.faults(checked, self.conn.sumo.vehicle, self._route_indices):
             # Not where blendtrack put it: SUMO's again, and counted (issue 18).
             if vid in self.active and not (what == "route index" and self._repair_route_index(vid)):
                 self.counts["placement_faults"] += 1

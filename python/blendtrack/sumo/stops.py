@@ -138,6 +138,21 @@ class Stops:
     def drop(self, vid: str) -> None:
         self.pending.pop(vid, None)
 
+    def dwelling(self) -> set[str]:
+        """The vehicles SUMO has stopped at a stop now (asked of SUMO: the
+        step just taken may have started the stop): during the dwell SUMO
+        owns their place (a parking stop takes the vehicle off its lane), so
+        the placement check leaves them alone."""
+        is_stopped = self.conn.sumo.vehicle.isStopped
+
+        def stopped(vid: str) -> bool:
+            try:
+                return bool(is_stopped(vid))
+            except Exception:
+                return False  # gone: the check for vanished vehicles sees to it
+
+        return {vid for vid, p in self.pending.items() if p.dwelling or stopped(vid)}
+
     def keep_speeds(self, ids: list[str], held: list[int], speeds: Any) -> None:
         """Sends again the speed of each vehicle with stops that the step
         moved without a SUMO call (indices ``held`` into ``ids``): SUMO keeps

@@ -740,6 +740,7 @@ impl RouteFleet {
         }
         for (k, col) in [
             ("red_light", r.red_light),
+            ("past_route_end", r.past_route_end),
             ("lane_change_due", r.lane_change_due),
             ("read_position", r.read_position),
         ] {

@@ -38,6 +38,9 @@ pub struct RouteOutputs {
     pub alpha: Vec<f64>,
     pub accel_mps2: Vec<f64>,
     pub lateral_error_m: Vec<f64>,
+    /// The body is past the route's end (the track ends there: the lateral
+    /// error is then the distance past it, not an error).
+    pub past_route_end: Vec<bool>,
     pub heading_error_rad: Vec<f64>,
     pub s_rear_m: Vec<f64>,
     pub curvature_per_m: Vec<f64>,
@@ -77,6 +80,7 @@ impl RouteOutputs {
             alpha: Vec::with_capacity(n),
             accel_mps2: Vec::with_capacity(n),
             lateral_error_m: Vec::with_capacity(n),
+            past_route_end: Vec::with_capacity(n),
             heading_error_rad: Vec::with_capacity(n),
             s_rear_m: Vec::with_capacity(n),
             curvature_per_m: Vec::with_capacity(n),
@@ -305,6 +309,7 @@ impl RouteFleet {
         r.delta_rad.push(state.delta_rad);
         r.alpha.push(out.alpha[i]);
         r.lateral_error_m.push(motion.lateral_error_m);
+        r.past_route_end.push(past_route_end(d, out.s_rear_m[i]));
         r.heading_error_rad.push(motion.heading_error_rad);
         r.s_rear_m.push(out.s_rear_m[i]);
         r.curvature_per_m.push(out.curvature_per_m[i]);
