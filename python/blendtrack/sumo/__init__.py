@@ -73,7 +73,7 @@ INCOMPLETE = "INCOMPLETE"
 #: What a run writes (removed at the start, so no earlier run's file is left
 #: beside a new run's partial outputs).
 OUTPUTS = (
-    "summary.json", "vehicles.csv", "collisions.csv", "trace.csv", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
+    "summary.json", "vehicles.csv", "collisions.csv", "red_lights.csv", "trace.csv", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
     "sumo/tripinfo.xml", "sumo/collisions.xml", "sumo/sumo.log", "sumo/fcd.xml", "sumo/ssm.xml",
 )
 
@@ -105,6 +105,7 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
             f"{scenario.sumocfg}: SUMO stopped the run: {first} (see {out / 'sumo' / 'sumo.log'})"
         ) from None
     _count_collisions(result, out)
+    run.incidents.write_csv(out / "red_lights.csv")
     report.write_vehicles_csv(result.records, out / "vehicles.csv")
     if options.trace:
         run.write_trace(out / "trace.csv")

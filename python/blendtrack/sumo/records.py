@@ -45,6 +45,10 @@ class VehicleRecord:
     reverse_warnings: int = 0
     time_above_comfort_s: float = 0.0
     lane_changes: int = 0
+    #: Stop lines crossed on red by SUMO's own signal state, and steps of
+    #: braking SUMO would warn of (blendtrack.sumo.incidents).
+    red_light_crossings_sumo: int = 0
+    emergency_brakings: int = 0
 
 
 class SampleHistograms:

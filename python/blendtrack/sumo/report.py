@@ -47,6 +47,8 @@ EXTRA_COLUMNS = (
     "reverse_warnings",
     "time_above_comfort_s",
     "lane_changes",
+    "red_light_crossings_sumo",
+    "emergency_brakings",
 )
 
 
@@ -78,6 +80,8 @@ def vehicle_row(r: VehicleRecord) -> dict[str, Any]:
         "reverse_warnings": r.reverse_warnings,
         "time_above_comfort_s": r.time_above_comfort_s,
         "lane_changes": r.lane_changes,
+        "red_light_crossings_sumo": r.red_light_crossings_sumo,
+        "emergency_brakings": r.emergency_brakings,
     }
 
 

@@ -60,6 +60,7 @@ import numpy as np
 import blendtrack
 from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection, loads_ok_marker, sumo_binary
+from blendtrack.sumo.incidents import Incidents
 from blendtrack.sumo.junctions import YIELD_LOOKAHEAD_M, Junctions
 from blendtrack.sumo.lanechange import LANE_CHANGE_ROOM_M, LaneChanges
 from blendtrack.sumo.network import Network
@@ -125,6 +126,8 @@ class SumoRun:
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel)
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel)
         self.trace = Trace()
+        #: Red-light crossings, emergency brakings and teleports from SUMO's state.
+        self.incidents = Incidents(self.conn, self.network)
         self._seen: set[str] = set()
         self._background: set[str] = set()
         #: Control steps so far.
@@ -209,6 +212,7 @@ class SumoRun:
             "courtesy_steps": lanes["courtesy_steps"],
             "merge_lead_steps": lanes["merge_lead_steps"],
             "tactical_lane_changes": lanes["tactical_lane_changes"],
+            **self.incidents.summary(),
         }
 
     def _loop(self, end: float | None) -> int:
@@ -249,7 +253,9 @@ class SumoRun:
         ev = sumo.simulation.getSubscriptionResults()
         for vid in ev.get(tc.VAR_ARRIVED_VEHICLES_IDS, ()):
             self._drop(vid, t, "arrived")
-        for vid in ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ()):
+        teleporting = ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ())
+        self.incidents.teleports(teleporting, self.active)
+        for vid in teleporting:
             if vid in self.active:
                 self._drop(vid, t, "teleport")
         colliding = ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ())
@@ -463,6 +469,7 @@ class SumoRun:
             self.lanes.due = [
                 (ids[i], lane, pos, sp) for i, lane, pos, sp in zip(due.tolist(), out["lane"][due].tolist(), front, v.tolist())
             ]
+        self.incidents.after_moves(t, ids, acts, out)
         self.vehicles.note_trajectories(t, acts, out)
         if self.opt.trace:
             self.trace.add(t, ids, out, self.tracks.edges.names)
