@@ -76,7 +76,7 @@ INCOMPLETE = "INCOMPLETE"
 #: What a run writes (removed at the start, so no earlier run's file is left
 #: beside a new run's partial outputs).
 OUTPUTS = (
-    "summary.json", "vehicles.csv", "collisions.csv", "trace.csv", "alpha.png", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
+    "summary.json", "vehicles.csv", "collisions.csv", "red_lights.csv", "trace.csv", "alpha.png", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
     "sumo/tripinfo.xml", "sumo/collisions.xml", "sumo/sumo.log", "sumo/fcd.xml", "sumo/ssm.xml",
 )
 
@@ -114,6 +114,7 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     finally:
         run.trace.close()
     _count_collisions(result, out)
+    run.incidents.write_csv(out / "red_lights.csv")
     if options.trace:
         report.plot_alpha(out / "trace.csv", out / "alpha.png")
     report.plot_run(result, out, scenario.comfort_lateral_accel_mps2)

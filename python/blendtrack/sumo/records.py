@@ -50,6 +50,10 @@ class VehicleRecord:
     stops_served: int = 0
     stops_skipped: int = 0
     stop_skip_reasons: str = ""
+    #: Stop lines crossed on red by SUMO's own signal state, and steps of
+    #: braking SUMO would warn of (blendtrack.sumo.incidents).
+    red_light_crossings_sumo: int = 0
+    emergency_brakings: int = 0
 
 
 @dataclass

@@ -51,6 +51,8 @@ EXTRA_COLUMNS = (
     "stops_served",
     "stops_skipped",
     "stop_skip_reasons",
+    "red_light_crossings_sumo",
+    "emergency_brakings",
 )
 
 
@@ -85,6 +87,8 @@ def vehicle_row(r: VehicleRecord) -> dict[str, Any]:
         "stops_served": r.stops_served,
         "stops_skipped": r.stops_skipped,
         "stop_skip_reasons": r.stop_skip_reasons,
+        "red_light_crossings_sumo": r.red_light_crossings_sumo,
+        "emergency_brakings": r.emergency_brakings,
     }
 
 

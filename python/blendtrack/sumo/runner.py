@@ -61,6 +61,7 @@ import blendtrack
 from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection, loads_ok_marker, sumo_binary
 from blendtrack.sumo.faults import PlacementCheck, lane_position, repair, route_indices_near
+from blendtrack.sumo.incidents import Incidents
 from blendtrack.sumo.junctions import YIELD_LOOKAHEAD_M, Junctions
 from blendtrack.sumo.lanechange import LANE_CHANGE_ROOM_M, LaneChanges
 from blendtrack.sumo.network import Network
@@ -130,6 +131,8 @@ class SumoRun:
         self.trace = Trace()
         #: The vehicles in the simulation whose departure was seen (an id
         #: goes when its vehicle arrives, so the set stays as small as the traffic).
+        #: Red-light crossings, emergency brakings and teleports from SUMO's state.
+        self.incidents = Incidents(self.conn, self.network)
         self._seen: set[str] = set()
         #: Vehicles left to SUMO (not selected, or not drivable).
         self._background = 0
@@ -230,6 +233,7 @@ class SumoRun:
             "merge_lead_steps": lanes["merge_lead_steps"],
             "tactical_lane_changes": lanes["tactical_lane_changes"],
             **self.stops.counts,
+            **self.incidents.summary(),
         }
 
     def _loop(self, end: float | None) -> int:
@@ -271,7 +275,9 @@ class SumoRun:
         for vid in ev.get(tc.VAR_ARRIVED_VEHICLES_IDS, ()):
             self._drop(vid, t, "arrived")
             self._seen.discard(vid)
-        for vid in ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ()):
+        teleporting = ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ())
+        self.incidents.teleports(teleporting, self.active)
+        for vid in teleporting:
             if vid in self.active:
                 self._drop(vid, t, "teleport")
         colliding = ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ())
@@ -503,6 +509,7 @@ class SumoRun:
             self.lanes.due = [
                 (ids[i], lane, pos, sp) for i, lane, pos, sp in zip(due.tolist(), out["lane"][due].tolist(), front, v.tolist())
             ]
+        self.incidents.after_moves(t, ids, acts, out)
         self.vehicles.note_trajectories(t, acts, out)
         if self.opt.trace:
             self.trace.add(t, ids, out, self.tracks.edges.names)
