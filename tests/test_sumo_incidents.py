@@ -15,6 +15,7 @@ from typing import Any
 import pytest
 
 from blendtrack import sumo
+from blendtrack.sumo import report
 from blendtrack.sumo.connection import sumo_binary
 from blendtrack.sumo.runner import RunOptions, SumoRun
 
@@ -153,6 +154,8 @@ def test_collisions_are_counted_as_sumo_records_them_under_every_action(net: Pat
     run = SumoRun(sc, RunOptions(controlled_ids=("c",), end_s=20, progress=False), out)
     run.step_hooks.append(_push_onto)
     result = run.run()
+    # What run_scenario streams as the vehicles finish; the collision count reads the ids from it.
+    report.write_vehicles_csv(result.records, out / "vehicles.csv")
     sumo._count_collisions(result, out)
     assert getattr(run, "_pushed", False)
     root = ET.parse(out / "sumo" / "collisions.xml").getroot()
