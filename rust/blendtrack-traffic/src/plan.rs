@@ -257,7 +257,17 @@ fn decide_stop(
             }
         }
         Signal::Priority | Signal::Yield => {
-            let near = gap < st.yield_lookahead_m;
+            // A link without priority is asked about from where the vehicle
+            // could still stop for it (reaction time at its speed, braking
+            // at its planning deceleration) plus the look-ahead: asked from
+            // the look-ahead alone, a vehicle at 13.9 m/s (it needs 38 m)
+            // was never asked and crossed a busy major road at speed.
+            let reach = if sig == Signal::Yield {
+                st.yield_lookahead_m + stopping_distance(cfg, v)
+            } else {
+                st.yield_lookahead_m
+            };
+            let near = gap < reach;
             let held = d.holding == Some(next);
             // Where the leader's back would stop if it braked now at 4 m/s^2.
             let blocked = lg.is_finite()
@@ -283,6 +293,12 @@ fn decide_stop(
         }
     }
     dec
+}
+
+/// How far a vehicle at speed `v` travels until it stands: its reaction
+/// time at `v`, then braking at its planning deceleration.
+fn stopping_distance(cfg: &ControllerConfig, v: f64) -> f64 {
+    v * cfg.reaction_time + v * v / (-2.0 * cfg.max_deceleration.min(-0.5))
 }
 
 /// The gap to the line of a red light (or of a yellow one it can stop
