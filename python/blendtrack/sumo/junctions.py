@@ -5,6 +5,10 @@ traffic lights' states passed on to the RouteFleet."""
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
+
 from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.geometry import body_segment, segments_distance
@@ -26,6 +30,18 @@ STOP_MARGIN_M = 1.0
 #: Share of the planning deceleration a turner should need to stop at its
 #: internal waiting point once past the entry line.
 ENTRY_SLOW_DECEL = 0.5
+#: At a link without priority a vehicle waits while a prohibiting foe would
+#: reach the junction before it has crossed it plus this margin (s).
+CROSS_MARGIN_S = 1.0
+#: Room (m) between a vehicle crossing a foe's way and the foe at the point
+#: where the ways cross: about half a lane's width plus a margin.
+CONFLICT_CLEAR_M = 2.5
+#: At a stop sign or an all-way stop a vehicle counts as having halted when
+#: it stood (SUMO's speed below this, m/s; SUMO's own halting threshold)...
+HALT_SPEED_MPS = 0.1
+#: ... with its front within this of its stop line (m; it stops
+#: ``standstill_margin_m``, 1 m, short of it).
+HALT_NEAR_M = 3.0
 #: A vehicle inside a junction is in the way of one about to enter when its
 #: body comes within this much of the half width of the entering vehicle's
 #: path through the junction (m).
@@ -35,24 +51,38 @@ INSIDE_MARGIN_M = 0.3
 class Junctions:
     """Yield answers for ``RouteFleet.plan_sumo``'s questions, and the lights' states."""
 
-    def __init__(self, conn: SumoConnection, network: Network, tracks: Tracks, fleet: RouteFleet, plan_decel: float) -> None:
+    def __init__(self, conn: SumoConnection, network: Network, tracks: Tracks, fleet: RouteFleet, plan_decel: float,
+                 plan_accel: float = 1.0) -> None:
         self.conn = conn
         self.network = network
         self.tracks = tracks
         self.fleet = fleet
         #: The deceleration (m/s^2, > 0) a vehicle plans to stop with.
         self.plan_decel = plan_decel
+        #: The acceleration (m/s^2, > 0) a vehicle crosses a junction with.
+        self.plan_accel = max(plan_accel, 0.1)
+        #: Per vehicle: the junction lane of the stop sign (or all-way stop)
+        #: it has halted at.
+        self.halted: dict[str, str] = {}
         #: Each traffic light's last state (as SUMO's state string).
         self.tls_state: dict[str, str] = {}
         self.counts = {"inside_junction_waits": 0}
 
     def refresh_tls(self) -> None:
-        """Passes the lights that changed this step to the RouteFleet."""
+        """Passes the lights that changed this step to the RouteFleet.
+
+        With libsumo each light's state is read anew (a microsecond each):
+        the subscription's value is the one of the simulation step, and a
+        light another client switched since (a step hook of this process,
+        which runs after the step) would be seen a step late. Over TraCI
+        the subscription holds what the other clients did before the step."""
         tc = self.conn.tc
         light = self.tracks.lights.id
         set_signal = self.fleet.set_signal
-        for tls, res in self.conn.sumo.trafficlight.getAllSubscriptionResults().items():
-            state = res.get(tc.TL_RED_YELLOW_GREEN_STATE, "")
+        tl = self.conn.sumo.trafficlight
+        fresh = not self.conn.use_subscriptions
+        for tls, res in tl.getAllSubscriptionResults().items():
+            state = tl.getRedYellowGreenState(tls) if fresh else res.get(tc.TL_RED_YELLOW_GREEN_STATE, "")
             if self.tls_state.get(tls) != state:
                 self.tls_state[tls] = state
                 set_signal(light(tls), state)
@@ -62,12 +92,32 @@ class Junctions:
         stop = self.fleet.next_stop(slot)
         if stop is None:
             return False
+        if stop[0] < self.fleet.s_front(slot):
+            # Its front is past the line (a step of 1 s can carry it there
+            # while the way was clear): it is in, and clears the junction.
+            # Told to wait it stood there, in the crossing road's way.
+            return False
         via = self.tracks.lanes.name(stop[4])
         if via in self.network.internal_vias:
             if self.internal_junction_busy(vid, via):
                 return True
         else:
-            for link in self.conn.sumo.vehicle.getNextLinks(vid):
+            state = self.network.link_state(via)
+            if state in "sw" and state and self.halted.get(vid) != via:
+                # A stop sign or an all-way stop: stand at the line first.
+                gap = stop[0] - self.fleet.s_front(slot)
+                if gap > HALT_NEAR_M or float(self.conn.sumo.vehicle.getSpeed(vid)) >= HALT_SPEED_MPS:
+                    return True
+                self.halted[vid] = via
+            if state == "w":
+                # All-way stop: once halted, first come first served.
+                if self.allway_busy(vid, via):
+                    return True
+            elif state and state not in "MGOZ" and self.link_busy(vid, slot, via, stop[0]):
+                return True
+            # SUMO's word on foes, but not at an all-way stop, where it
+            # reports the foes halted at their lines as foes.
+            for link in (() if state == "w" else self.conn.sumo.vehicle.getNextLinks(vid)):
                 # (lane, has priority, is open, has foe, via lane, state, direction, length)
                 if link[4] == via:
                     if (not link[1]) and bool(link[3]):
@@ -96,6 +146,45 @@ class Junctions:
                     return True
         return self.junction_blocked(vid, via)
 
+    def leader_beyond(self, vid: str, track_lanes: list[str]) -> tuple[str, float] | None:
+        """The leader of ``vid`` when it is on a junction lane and ``getLeader``
+        found none: the nearest vehicle on the rest of its way through the
+        junction (its connection's junction lanes, then the lane it leads to),
+        as (id, gap as ``getLeader`` gives it), or None. From a junction lane
+        before an internal junction (the first part of a left turn) SUMO's
+        ``getLeader`` does not look onto the lane after the waiting point
+        (traced on Bologna: a left turner waited there, ``getLeader`` of the
+        controlled vehicle behind it said None, and it drove into it). SUMO
+        may have the vehicle on the lane beside its track's on the same
+        junction edge (its own choice of lane at the entry; the track's
+        ``track_lanes`` come next): the way ahead is then the track's lane's."""
+        lane = self.conn.get_lane_id(vid)
+        if not lane.startswith(":"):
+            return None
+        pos = float(self.conn.get_lane_pos(vid))
+        beside = lane not in track_lanes
+        if beside:
+            edge = lane.rsplit("_", 1)[0]
+            lane = next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
+        ahead = self.network.lanes_after(lane)
+        if not ahead:
+            return None
+        veh = self.conn.sumo.vehicle
+        dist = -pos
+        for k, (nxt, length) in enumerate(ahead):
+            # SUMO lists a lane's vehicles back to front.
+            on = [x for x in self.conn.vehicles_on(nxt) if x != vid]
+            if k == 0:
+                # On its own lane getLeader has looked; on the track's lane
+                # beside it, the vehicles ahead of it count.
+                on = [x for x in on if float(veh.getLanePosition(x)) > pos] if beside else []
+            if on:
+                other = on[0]
+                back = float(veh.getLanePosition(other)) - float(veh.getLength(other))
+                return other, dist + back - float(veh.getMinGap(vid))
+            dist += length
+        return None
+
     def junction_blocked(self, vid: str, via: str) -> bool:
         """Is a vehicle inside the junction in the way of ``vid``, about to
         enter it through ``via``: its body (SUMO's front point, angle, length
@@ -121,7 +210,74 @@ class Junctions:
                     return True
         return False
 
-    def internal_junction_busy(self, vid: str, via: str, horizon_s: float = INTERNAL_YIELD_S) -> bool:
+    def forget(self, vid: str) -> None:
+        """``vid`` is no longer controlled."""
+        self.halted.pop(vid, None)
+
+    def allway_busy(self, vid: str, via: str) -> bool:
+        """At an all-way stop, halted at the line: a foe inside the junction
+        on its way, or one halted at its own line (its front within
+        ``HALT_NEAR_M`` plus the standstill margin of it) that has waited
+        longer, goes first; foes still approaching have to halt too."""
+        veh = self.conn.sumo.vehicle
+        vehicles_on = self.conn.vehicles_on
+        mine = float(veh.getWaitingTime(vid))
+        for foe, incoming, lane_length, _, _ in self.network.internal_foes(via):
+            if any(other != vid for other in vehicles_on(foe)):
+                return True
+            if incoming is None:
+                continue
+            for other in vehicles_on(incoming):
+                if other == vid:
+                    continue
+                near = lane_length - float(veh.getLanePosition(other)) < HALT_NEAR_M + STOP_MARGIN_M
+                if near and float(veh.getSpeed(other)) < HALT_SPEED_MPS and float(veh.getWaitingTime(other)) > mine:
+                    return True
+        return False
+
+    def link_busy(self, vid: str, slot: int, via: str, stop_s: float) -> bool:
+        """At a link without priority: is a foe with priority over it inside
+        the junction on its way, or would one approaching on the lane before
+        it reach the point where the two ways cross before ``vid`` has
+        crossed it? ``vid`` crosses from where it is, from its speed at
+        ``plan_accel``, until its back is ``CONFLICT_CLEAR_M`` past the point;
+        a foe arrives at its speed, its front ``CONFLICT_CLEAR_M`` short of
+        the point. SUMO's ``getNextLinks`` reports foes arriving within about
+        a second only, too late for a vehicle that needs five to cross from
+        standstill at 1 m/s^2."""
+        foes = self.network.prohibitors(via)
+        if not foes:
+            return False
+        veh = self.conn.sumo.vehicle
+        vehicles_on = self.conn.vehicles_on
+        v = max(float(veh.getSpeed(vid)), 0.0)
+        gap = max(stop_s - self.fleet.s_front(slot), 0.0)
+        length = float(veh.getLength(vid))
+        a = self.plan_accel
+        first = ""
+        for foe, incoming, lane_length, tls, link in foes:
+            if any(other != vid for other in vehicles_on(foe)):
+                return True
+            if incoming is None:
+                continue
+            if tls:
+                state = self.tls_state.get(tls, "")
+                if 0 <= link < len(state) and state[link] not in "GgsOoyY":
+                    continue  # the foe's light is red: it stops
+            first = foe
+            ours, theirs = self.network.conflict(via, first)
+            dist = gap + ours + CONFLICT_CLEAR_M + length
+            t_cross = (math.sqrt(v * v + 2.0 * a * dist) - v) / a + CROSS_MARGIN_S
+            for other in vehicles_on(incoming):
+                if other == vid:
+                    continue
+                d = lane_length - float(veh.getLanePosition(other)) + theirs - CONFLICT_CLEAR_M
+                if d < INTERNAL_YIELD_NEAR_M or d < t_cross * float(veh.getSpeed(other)):
+                    return True
+        return False
+
+    def internal_junction_busy(self, vid: str, via: str, horizon_s: float = INTERNAL_YIELD_S,
+                               foes: list[tuple[str, str | None, float, str, int]] | None = None) -> bool:
         """At the waiting point of a turn across oncoming lanes: is a foe
         inside the junction, or about to enter it through an open link?
 
@@ -135,7 +291,7 @@ class Junctions:
         """
         veh = self.conn.sumo.vehicle
         vehicles_on = self.conn.vehicles_on
-        for foe, incoming, length, tls, link in self.network.internal_foes(via):
+        for foe, incoming, length, tls, link in (self.network.internal_foes(via) if foes is None else foes):
             if any(other != vid for other in vehicles_on(foe)):
                 return True
             if incoming is None:

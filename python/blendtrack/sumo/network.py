@@ -35,6 +35,10 @@ class Network:
         #: Per junction entry lane: its internal waiting point and the distance to it.
         self._waiting_points: dict[str, tuple[str | None, float]] = {}
         self._foes: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
+        self._after: dict[str, list[tuple[str, float]]] = {}
+        self._prohibitors: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
+        self._states: dict[str, str] = {}
+        self._conflicts: dict[tuple[str, str], tuple[float, float]] = {}
 
     def net(self) -> Any:
         """The sumolib network."""
@@ -104,6 +108,53 @@ class Network:
             self._waiting_points[via] = hit
         return hit
 
+    def after_internal_junction(self, via: str) -> bool:
+        """Does the junction lane ``via`` start at an internal junction (the
+        waiting point of a turn across oncoming lanes), not at the junction's
+        entry? (An unsignalised entry has link index -1 like an internal
+        junction, so the index does not tell.)"""
+        c = self.connection_of(via)
+        if c is None:
+            return False
+        chain = _via_chain(self.net(), c)
+        return bool(chain) and chain[0].getID() != via
+
+    def link_state(self, via: str) -> str:
+        """The right-of-way state of the connection whose junction lanes
+        include ``via`` (``M`` major, ``m`` minor, ``=`` right before left,
+        ``s`` stop sign, ``w`` all-way stop, ``Z`` zipper, or a light's
+        ``o``/``O``); "" when unknown."""
+        hit = self._states.get(via)
+        if hit is None:
+            c = self.connection_of(via)
+            hit = self._states[via] = (c.getState() or "") if c is not None else ""
+        return hit
+
+    def prohibitors(self, via: str) -> list[tuple[str, str | None, float, str, int]]:
+        """The foes a vehicle entering the junction through ``via`` must give
+        way to: the connections that prohibit its own by the network's
+        right-of-way matrix (sumolib's ``Node.forbids``), in the form of
+        ``internal_foes``. At a right-before-left junction only the ones from
+        the right; a connection from the left gives way to this one."""
+        hit = self._prohibitors.get(via)
+        if hit is None:
+            net = self.net()
+            hit = []
+            c = self.connection_of(via)
+            if c is not None:
+                node = c.getFrom().getToNode()
+                for other in node.getConnections():
+                    if other is c or not node.forbids(other, c):
+                        continue
+                    chain = [part.getID() for part in _via_chain(net, other)]
+                    if not chain:
+                        continue
+                    src = other.getFromLane()
+                    hit.append((chain[0], src.getID(), float(src.getLength()), other.getTLSID() or "", int(other.getTLLinkIndex())))
+                    hit.extend((part, None, 0.0, "", -1) for part in chain[1:])
+            self._prohibitors[via] = hit
+        return hit
+
     def internal_foes(self, via: str) -> list[tuple[str, str | None, float, str, int]]:
         """Foe junction lanes of an internal junction lane: (foe lane, the normal
         lane leading into it or None, that lane's length, its traffic light, link
@@ -130,3 +181,61 @@ class Network:
                     hit.extend((part, None, 0.0, "", -1) for part in chain[1:])
             self._foes[via] = hit
         return hit
+
+    def lanes_after(self, via: str) -> list[tuple[str, float]]:
+        """The junction lane ``via`` and the lanes after it on its connection
+        (the rest of its junction lanes, then the lane the connection leads
+        to), each with its length; [] when ``via`` is no junction lane."""
+        hit = self._after.get(via)
+        if hit is None:
+            hit = []
+            c = self.connection_of(via)
+            if c is not None:
+                chain = list(_via_chain(self.net(), c))
+                ids = [part.getID() for part in chain]
+                if via in ids:
+                    hit = [(part.getID(), float(part.getLength())) for part in chain[ids.index(via):]]
+                    to = c.getToLane()
+                    hit.append((to.getID(), float(to.getLength())))
+            self._after[via] = hit
+        return hit
+
+    def conflict(self, via: str, foe: str) -> tuple[float, float]:
+        """Where the way through the junction from ``via`` on first meets the
+        way of the foe connection whose first junction lane is ``foe``: the
+        distance to that point along each (m, from the start of ``via`` and
+        of ``foe``); where they never cross (they merge), the ends of both."""
+        key = (via, foe)
+        hit = self._conflicts.get(key)
+        if hit is None:
+            path, _ = self.junction_lanes(via)
+            other, _ = self.junction_lanes(foe)
+            hit = first_crossing(path, other)
+            self._conflicts[key] = hit
+        return hit
+
+
+def _arc(p: np.ndarray) -> np.ndarray:
+    """Arc length at each point of the polyline ``p``."""
+    if len(p) < 2:
+        return np.zeros(len(p))
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(p, axis=0).T))])
+
+
+def first_crossing(p: np.ndarray, q: np.ndarray) -> tuple[float, float]:
+    """The arc lengths along ``p`` and along ``q`` (polylines, n x 2) of the
+    first point of ``p`` where they cross; their lengths where they never do."""
+    sp, sq = _arc(p), _arc(q)
+    for i in range(len(p) - 1):
+        a, d = p[i], p[i + 1] - p[i]
+        for j in range(len(q) - 1):
+            b, e = q[j], q[j + 1] - q[j]
+            den = d[0] * e[1] - d[1] * e[0]
+            if abs(den) < 1e-12:
+                continue
+            w = b - a
+            t = (w[0] * e[1] - w[1] * e[0]) / den
+            u = (w[0] * d[1] - w[1] * d[0]) / den
+            if 0.0 <= t <= 1.0 and 0.0 <= u <= 1.0:
+                return float(sp[i] + t * (sp[i + 1] - sp[i])), float(sq[j] + u * (sq[j + 1] - sq[j]))
+    return float(sp[-1]) if len(sp) else 0.0, float(sq[-1]) if len(sq) else 0.0

@@ -71,7 +71,7 @@ from blendtrack.sumo.scenario import Scenario
 from blendtrack.sumo.selection import Selection, parse_ids
 from blendtrack.sumo.stops import Stops
 from blendtrack.sumo.tracks import Active, Tracks
-from blendtrack.sumo.vehicles import LEADER_RANGE_M, Controlled
+from blendtrack.sumo.vehicles import LEADER_RANGE_M, Controlled, SumoLeaders
 
 __all__ = ["RunOptions", "RunResult", "SumoRun", "VehicleRecord", "loads_ok_marker", "parse_ids", "sumo_binary"]
 
@@ -125,9 +125,12 @@ class SumoRun:
         self.active = self.vehicles.active
         self.records = self.vehicles.records
         self.histograms = SampleHistograms()
-        self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel)
+        self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel,
+                                   float(base_config.preferred_acceleration))
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel)
         self.stops = Stops(self.conn, self.fleet, self.network)
+        obs_decel = base_config.max_obs_deceleration if "max_obs_deceleration" in options.fixed_keys else base_config.max_deceleration
+        self.sumo_leaders = SumoLeaders(self.conn, self.active, max(abs(float(obs_decel)), 0.5))
         self.trace = Trace()
         #: The vehicles in the simulation whose departure was seen (an id
         #: goes when its vehicle arrives, so the set stays as small as the traffic).
@@ -164,6 +167,7 @@ class SumoRun:
         self.lanes.drop(vid)
         self.stops.drop(vid)
         self.placement.forget(vid)
+        self.junctions.forget(vid)
 
     def _rebuild(self, act: Active) -> None:
         """The route changed (rerouting): a new track from where the vehicle is."""
@@ -275,6 +279,7 @@ class SumoRun:
         for vid in ev.get(tc.VAR_ARRIVED_VEHICLES_IDS, ()):
             self._drop(vid, t, "arrived")
             self._seen.discard(vid)
+            self.sumo_leaders.forget(vid)
         teleporting = ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ())
         self.incidents.teleports(teleporting, self.active)
         for vid in teleporting:
@@ -396,7 +401,7 @@ class SumoRun:
         if k is None:
             k = pos[i] = len(asked)
             asked.append(i)
-            leaders.append(self.conn.get_leader(self.vehicles.ids[i], LEADER_RANGE_M))
+            leaders.extend(self.sumo_leaders.correct([self.conn.get_leader(self.vehicles.ids[i], LEADER_RANGE_M)]))
         return k
 
     def _leaders(self) -> tuple[list[int] | None, list[Any]]:
@@ -413,7 +418,11 @@ class SumoRun:
         names, lane_vehicles = self.tracks.lanes.names, self.conn.lane_vehicles
         ask = fleet.leaders_on_lanes(self.vehicles.slots, lanes, [lane_vehicles(names[lane]) for lane in lanes]).tolist()
         get_leader = self.conn.get_leader
-        return ask, [get_leader(ids[i], LEADER_RANGE_M) for i in ask]
+        leaders = [get_leader(ids[i], LEADER_RANGE_M) for i in ask]
+        for k, i in enumerate(ask):
+            if not leaders[k] or not leaders[k][0]:
+                leaders[k] = self.junctions.leader_beyond(ids[i], self.vehicles.order[i].geo.piece_lane)
+        return ask, self.sumo_leaders.correct(leaders)
 
     def _observe_subscribed(self, t: float) -> _Observed:
         """``_observe`` over TraCI: everything from the vehicle subscriptions."""
@@ -430,7 +439,7 @@ class SumoRun:
         self.vehicles.refresh_order()
         lane_id = self.tracks.lanes.id
         rows = [res[vid] for vid in self.vehicles.ids]
-        leaders = [r.get(tc.VAR_LEADER) for r in rows]
+        leaders = self.sumo_leaders.correct([r.get(tc.VAR_LEADER) for r in rows])
         lanes = [lane_id(r.get(tc.VAR_LANE_ID, "")) for r in rows]
         poss = [float(r.get(tc.VAR_LANEPOSITION, math.nan)) for r in rows]
         self.lanes.changing_leaders(leaders, None, self.vehicles.index)

@@ -110,7 +110,7 @@ class Tracks:
             path = blendtrack.Path(geo.points, geo.widths, closed=False)
             lanes, edge_ids = self.lanes, self.edges
             stops = geo.stops
-            network.internal_vias.update(st[4] for st in stops if st[2] < 0)
+            network.internal_vias.update(st[4] for st in stops if st[2] < 0 and network.after_internal_junction(st[4]))
             track = self.fleet.add_route(
                 path,
                 self.config,

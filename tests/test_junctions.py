@@ -1,0 +1,306 @@
+"""Every kind of junction (issue 18 item 4), each on a small network built
+here with SUMO's netconvert: a crossing of a major and a minor road
+(priority), of two equal roads (right before left), an all-way stop, an
+actuated light and a light another client switches. Controlled vehicles
+come from one side, SUMO's drivers from the other; what is checked is what
+SUMO records or reports: its collision output (junction collisions
+included), its emergency-braking warnings, the link states of its lights,
+and where and how fast it has each vehicle."""
+
+from __future__ import annotations
+
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from blendtrack.sumo import resolve_scenario
+from blendtrack.sumo.connection import sumo_binary
+from blendtrack.sumo.options import RunOptions
+from blendtrack.sumo.outputs import read_collisions
+from blendtrack.sumo.runner import SumoRun
+from blendtrack.sumo.vehicles import euler_brake_gap
+
+#: The arms' length (m) and speed limit (m/s).
+ARM_M = 200.0
+SPEED = 13.89
+
+
+def _netconvert() -> str:
+    return str(Path(sumo_binary(False)).with_name("netconvert"))
+
+
+def _crossing(tmp: Path, node_type: str, tl_type: str = "static", minor_flow: str = 'period="6"',
+              major_flow: str = 'period="4"', step: float = 1.0, end: float = 300.0) -> Path:
+    """A crossing of a west-east road (priority 3, background vehicles) and
+    a south-north road (priority 1, the controlled vType), junction ``C`` of
+    netconvert's ``node_type``; returns the configuration."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    tl = f' tlType="{tl_type}"' if node_type == "traffic_light" else ""
+    (tmp / "n.nod.xml").write_text(
+        f'<nodes><node id="C" x="0" y="0" type="{node_type}"{tl}/>'
+        f'<node id="W" x="-{ARM_M}" y="0"/><node id="E" x="{ARM_M}" y="0"/>'
+        f'<node id="S" x="0" y="-{ARM_M}"/><node id="N" x="0" y="{ARM_M}"/></nodes>\n')
+    (tmp / "n.edg.xml").write_text(
+        f'<edges><edge id="WC" from="W" to="C" priority="3" numLanes="1" speed="{SPEED}"/>'
+        f'<edge id="CE" from="C" to="E" priority="3" numLanes="1" speed="{SPEED}"/>'
+        f'<edge id="SC" from="S" to="C" priority="1" numLanes="1" speed="{SPEED}"/>'
+        f'<edge id="CN" from="C" to="N" priority="1" numLanes="1" speed="{SPEED}"/></edges>\n')
+    proc = subprocess.run([_netconvert(), "-n", str(tmp / "n.nod.xml"), "-e", str(tmp / "n.edg.xml"), "-o", str(tmp / "n.net.xml"),
+                           "--no-turnarounds", "true"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    (tmp / "r.rou.xml").write_text(
+        '<routes><vType id="bg"/>'
+        '<vType id="ctl"><param key="blendtrack.controlled" value="true"/></vType>'
+        f'<flow id="major" type="bg" from="WC" to="CE" begin="0" end="{end}" {major_flow} departSpeed="max"/>'
+        f'<flow id="minor" type="ctl" from="SC" to="CN" begin="0" end="{end}" {minor_flow} departSpeed="max"/></routes>\n')
+    cfg = tmp / "run.sumocfg"
+    cfg.write_text(
+        '<configuration><input><net-file value="n.net.xml"/><route-files value="r.rou.xml"/></input>'
+        f'<time><end value="{end}"/><step-length value="{step}"/></time>'
+        '<processing><collision.check-junctions value="true"/></processing></configuration>\n')
+    return cfg
+
+
+class Watch:
+    """A step hook that keeps, per vehicle, where SUMO had it each step
+    (lane, lane position, speed), and the lights' states."""
+
+    def __init__(self) -> None:
+        self.rows: dict[str, list[tuple[float, str, float, float]]] = {}
+        self.tls: list[tuple[float, dict[str, str]]] = []
+        self.links: dict[str, list[list[tuple[str, str, str]]]] = {}
+        self.extra: list[Callable[[SumoRun, float], None]] = []
+
+    def __call__(self, run: SumoRun, t: float) -> None:
+        for f in self.extra:
+            f(run, t)
+        veh, tl = run.sumo.vehicle, run.sumo.trafficlight
+        for vid in veh.getIDList():
+            self.rows.setdefault(vid, []).append((t, veh.getLaneID(vid), float(veh.getLanePosition(vid)), float(veh.getSpeed(vid))))
+        ids = tl.getIDList()
+        for tls in ids:
+            if tls not in self.links:
+                self.links[tls] = [list(map(tuple, link)) for link in tl.getControlledLinks(tls)]
+        self.tls.append((t, {tls: tl.getRedYellowGreenState(tls) for tls in ids}))
+
+
+def _run(cfg: Path, out: Path, watch: Watch, **kw: Any) -> tuple[SumoRun, dict[str, Any]]:
+    run = SumoRun(resolve_scenario(cfg), RunOptions(seed=0, progress=False, **kw), out)
+    run.step_hooks.append(watch)
+    res = run.run()
+    return run, res.summary
+
+
+def _controlled(run: SumoRun) -> set[str]:
+    return {r.vid for r in run.records}
+
+
+def _no_incidents(run: SumoRun, out: Path) -> None:
+    """No collision in SUMO's collision output (junction collisions are
+    checked), and no vehicle braking harder than its vType's decel (SUMO
+    warns of each such emergency braking in its log)."""
+    rows = read_collisions(out / "sumo" / "collisions.xml", _controlled(run))
+    assert rows == []
+    log = (out / "sumo" / "sumo.log").read_text() if (out / "sumo" / "sumo.log").exists() else ""
+    assert "emergency braking" not in log, log
+
+
+def _arrived(run: SumoRun) -> int:
+    return sum(1 for r in run.records if r.reason == "arrived")
+
+
+def _crossings(watch: Watch, vids: set[str], incoming: str) -> list[tuple[float, float, str]]:
+    """For each vehicle of ``vids``: (the time it was last on lane
+    ``incoming``, its speed then, the lane after) when it left that lane."""
+    out = []
+    for vid in vids:
+        rows = watch.rows.get(vid, [])
+        for a, b in zip(rows, rows[1:]):
+            if a[1] == incoming and b[1] != incoming:
+                out.append((a[0], a[3], b[1]))
+    return out
+
+
+def test_leaders_sumo_drives_stop_within_the_euler_brake_gap() -> None:
+    # Independent sum: the speed drops by decel dt at the start of each step.
+    for v, decel, dt in ((13.9, 4.5, 1.0), (30.0, 4.0, 0.1), (2.0, 4.5, 1.0), (0.0, 4.5, 1.0)):
+        speeds, s = [v], 0.0
+        while speeds[-1] - decel * dt > 0:
+            speeds.append(speeds[-1] - decel * dt)
+            s += speeds[-1] * dt
+        assert euler_brake_gap(v, decel, dt) == pytest.approx(s)
+    # Shorter than braking continuously, by about v dt / 2.
+    assert 13.9**2 / 9.0 - euler_brake_gap(13.9, 4.5, 1.0) == pytest.approx(13.9 / 2.0, abs=2.3)
+
+
+#: Random demand: a vehicle per second with these probabilities.
+MAJOR = 'probability="0.15"'
+MINOR = 'probability="0.1"'
+
+
+def _crossed(watch: Watch, prefix: str = "minor", lane: str = "CN_0") -> int:
+    """How many vehicles whose id starts with ``prefix`` got onto ``lane``."""
+    return sum(1 for vid, rows in watch.rows.items() if vid.startswith(prefix) and any(r[1] == lane for r in rows))
+
+
+def _plain(cfg: Path, out: Path, hook: Callable[[SumoRun, float], None] | None = None) -> Watch:
+    """The same scenario with SUMO's drivers only (and ``hook`` as another client)."""
+    watch = Watch()
+    if hook is not None:
+        watch.extra.append(hook)
+    _run(cfg, out, watch, controlled_ids=("nobody",))
+    return watch
+
+
+@pytest.mark.parametrize("step", [1.0, 0.1])
+def test_a_priority_junction_the_minor_road_gives_way(tmp_path: Path, step: float) -> None:
+    """Controlled vehicles on the minor road, random traffic on the major
+    road: no collision, nobody braking harder than its decel, and the
+    controlled vehicles get across, fewer than SUMO's drivers (measured: 16
+    and 19 against 25 and 35 at 1 s and 0.1 s steps): they wait for a gap
+    they can cross at their preferred 1 m/s^2 (5 s from standstill, SUMO's
+    drivers take 3 s at 2.6 m/s^2)."""
+    cfg = _crossing(tmp_path / "net", "priority", step=step, major_flow=MAJOR, minor_flow=MINOR, end=300.0)
+    out = tmp_path / "o"
+    watch = Watch()
+    run, summary = _run(cfg, out, watch)
+    assert summary["controlled_vehicles"] >= 20
+    _no_incidents(run, out)
+    plain = _plain(cfg, tmp_path / "p")
+    assert _crossed(watch) >= 0.4 * _crossed(plain)
+    if step < 0.5:
+        # SUMO's drivers on the major road never slow down for a controlled
+        # vehicle: none below 5 m/s on the last 30 m before the junction
+        # (plain SUMO: 9.4 m/s at the least). At a 1 s step they do: a
+        # controlled vehicle stopping at the line can end up a few
+        # centimetres over it in SUMO, inside the junction (docs/sumo.md).
+        for vid, rows in watch.rows.items():
+            if vid.startswith("major"):
+                assert all(v > 5.0 for _, lane, pos, v in rows if lane == "WC_0" and pos > ARM_M - 30.0), vid
+
+
+def test_right_before_left_the_vehicle_from_the_right_goes_first(tmp_path: Path) -> None:
+    """Two equal roads: the controlled vehicles (from the south) have the
+    background ones (from the west) on their left, so they have the right of
+    way (SUMO's right-of-way matrix says who prohibits whom); no collision,
+    and they get across as SUMO's drivers do."""
+    cfg = _crossing(tmp_path / "net", "right_before_left", major_flow=MAJOR, minor_flow=MINOR, end=300.0)
+    out = tmp_path / "o"
+    watch = Watch()
+    run, summary = _run(cfg, out, watch)
+    assert summary["controlled_vehicles"] >= 20
+    _no_incidents(run, out)
+    assert _crossed(watch) >= 0.9 * _crossed(_plain(cfg, tmp_path / "p"))
+
+
+def test_an_all_way_stop_halts_every_controlled_vehicle_before_it_enters(tmp_path: Path) -> None:
+    cfg = _crossing(tmp_path / "net", "allway_stop", major_flow=MAJOR, minor_flow=MINOR, end=300.0)
+    out = tmp_path / "o"
+    watch = Watch()
+    run, summary = _run(cfg, out, watch)
+    assert summary["controlled_vehicles"] >= 20
+    _no_incidents(run, out)
+    ctl = _controlled(run)
+    entered = [vid for vid in ctl if any(lane.startswith(":C") for _, lane, _, _ in watch.rows.get(vid, []))]
+    # First come, first served: about as many get across as under SUMO's
+    # drivers (measured 23 and 24 of 26).
+    assert len(entered) >= 0.8 * _crossed(_plain(cfg, tmp_path / "p"))
+    for vid in entered:
+        rows = watch.rows[vid]
+        first_in = next(i for i, r in enumerate(rows) if r[1].startswith(":C"))
+        # Standing (below 0.1 m/s, SUMO's own halting threshold) near the
+        # line (within 3 m plus the 1 m standstill margin) before entering.
+        # (SC_0 is 192.8 m long: the arm less the junction's 7.2 m.)
+        near = [v for _, lane, pos, v in rows[:first_in] if lane == "SC_0" and pos > ARM_M - 7.2 - 4.0]
+        assert near and min(near) < 0.1, (vid, near[-5:])
+
+
+def _red_crossings(watch: Watch, vids: set[str]) -> list[tuple[float, str, str]]:
+    """Controlled vehicles whose front crossed a stop line while SUMO had the
+    link red: the vehicle on the link's incoming lane after one step, on
+    its junction lane (or beyond) after the next, the light's state for the
+    link red ('r', 's' or 'u'...) after both."""
+    states = dict(watch.tls)
+    bad = []
+    for tls, links in watch.links.items():
+        by_in: dict[str, list[tuple[int, str, str]]] = {}
+        for k, group in enumerate(links):
+            for inc, outl, via in group:
+                by_in.setdefault(inc, []).append((k, outl, via))
+        for vid in vids:
+            rows = watch.rows.get(vid, [])
+            for a, b in zip(rows, rows[1:]):
+                for k, outl, via in by_in.get(a[1], []):
+                    if b[1] in (via, outl):
+                        before, after = states[a[0]][tls][k], states[b[0]][tls][k]
+                        if before in "rRu" and after in "rRu":
+                            bad.append((b[0], vid, before + after))
+    return bad
+
+
+def test_an_actuated_light_is_never_crossed_at_red(tmp_path: Path) -> None:
+    cfg = _crossing(tmp_path / "net", "traffic_light", tl_type="actuated", major_flow=MAJOR, minor_flow=MINOR, end=300.0)
+    out = tmp_path / "o"
+    watch = Watch()
+    run, summary = _run(cfg, out, watch)
+    ctl = _controlled(run)
+    assert len(ctl) >= 20
+    # The program is actuated: its phases are not all of one length.
+    changes = [t for (t, s), (_, s2) in zip(watch.tls, watch.tls[1:]) if s != s2]
+    assert len(changes) >= 6 and len({round(b - a) for a, b in zip(changes, changes[1:])}) >= 3
+    assert _red_crossings(watch, ctl) == []
+    assert summary["red_light_violations"] == 0
+    _no_incidents(run, out)
+    # Measured: 15 of 26 across against 25 under SUMO's drivers (see
+    # docs/sumo.md, Junctions: known limits).
+    assert _crossed(watch) >= 0.4 * _crossed(_plain(cfg, tmp_path / "p"))
+
+
+def test_a_light_switched_by_another_client_is_obeyed(tmp_path: Path) -> None:
+    """A step hook (another client) switches the light at irregular times
+    with SUMO's setRedYellowGreenState: green for one road, 3 s of yellow,
+    then green for the other."""
+    cfg = _crossing(tmp_path / "net", "traffic_light", end=300.0)
+    out = tmp_path / "o"
+    watch = Watch()
+    def make_client() -> Callable[[SumoRun, float], None]:
+        # Times (s) at which one road's green turns yellow, then red.
+        switch = iter([23.0, 41.0, 52.0, 90.0, 97.0, 131.0, 160.0, 171.0, 205.0, 233.0, 251.0, 280.0])
+        nxt = {"t": next(switch), "minor_green": True}
+
+        def client(run: SumoRun, t: float) -> None:
+            tl = run.sumo.trafficlight
+            tls = tl.getIDList()[0]
+            minor = ["SC_0" in {x[0] for x in group} for group in tl.getControlledLinks(tls)]
+
+            def state(minor_char: str, major_char: str) -> str:
+                return "".join(minor_char if m else major_char for m in minor)
+
+            if t < 1.0:
+                tl.setRedYellowGreenState(tls, state("G", "r"))
+            elif t >= nxt["t"]:
+                green = nxt["minor_green"]
+                tl.setRedYellowGreenState(tls, state("y", "r") if green else state("r", "y"))
+                if t >= nxt["t"] + 3.0:
+                    tl.setRedYellowGreenState(tls, state("r", "G") if green else state("G", "r"))
+                    nxt["minor_green"] = not green
+                    nxt["t"] = next(switch, 1e9)
+
+        return client
+
+    watch.extra.append(make_client())
+    run, summary = _run(cfg, out, watch)
+    ctl = _controlled(run)
+    assert len(ctl) >= 30
+    minor_states = {s[next(iter(s))] for _, s in watch.tls}
+    assert len(minor_states) >= 4, "the client switched the light"
+    assert _red_crossings(watch, ctl) == []
+    assert summary["red_light_violations"] == 0
+    _no_incidents(run, out)
+    # They get across, far fewer than SUMO's drivers (measured: 17 against
+    # 46): from standstill at their preferred 1 m/s^2 a queue clears slowly,
+    # and two of the greens last 8 s and 4 s (docs/sumo.md, Junctions).
+    assert _crossed(watch) >= 0.3 * _crossed(_plain(cfg, tmp_path / "p", make_client()))
