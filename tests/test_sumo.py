@@ -361,7 +361,13 @@ def test_mergers_line_up_and_change_lanes_without_emergency_braking(tmp_path: Pa
     assert "Simulation version" in log  # SUMO wrote its log, warnings on
     hard = [line for line in log.splitlines() if "performs emergency braking" in line]
     assert res.summary["merge_lead_steps"] > 0
-    assert sum(int(r["lane_changes"]) for r in _read_vehicles(tmp_path)) >= 10
+    # The claim is about merges, so merges must have happened: a ramp vehicle
+    # (flow auto_ramp) reaches the end of its route only by changing onto the
+    # mainline, so each one that arrived changed lanes at least once, and the
+    # ramp's automated flow (from 4 s, every 30 s, doubled by --scale 2) puts
+    # about 20 on the ramp in 300 s, with travel times under 150 s.
+    ramp = [r for r in _read_vehicles(tmp_path) if r["id"].startswith("auto_ramp") and r["end_reason"] == "arrived"]
+    assert ramp and all(int(r["lane_changes"]) >= 1 for r in ramp), ramp
     assert hard == [], hard[:3]
     assert res.summary["collisions"] == 0 and _collisions(tmp_path) == []
 
