@@ -64,6 +64,11 @@ class Selection:
             self.base_config = self.base_config.replace(alpha_mode="auto")
         elif options.alpha is not None:
             self.base_config = self.base_config.replace(lat_blend_factor=options.alpha, alpha_mode="fixed")
+        if "curve_lateral_accel" not in options.fixed_keys:
+            # The arc corridor keeps to the scenario's comfort bound; the
+            # others are the paper's ray cast (curve_lateral_accel 0).
+            a_y = conn.scenario.comfort_lateral_accel_mps2 if options.corridor == "arc" else 0.0
+            self.base_config = self.base_config.replace(curve_lateral_accel=a_y)
         self._types: dict[str, dict[str, Any]] = {}
         #: The vTypes --controlled-type stands for (a distribution: its members).
         self.controlled_types: set[str] = set()
