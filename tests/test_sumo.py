@@ -621,7 +621,7 @@ def test_border_margin_widens_the_virtual_borders_and_eases_the_curves(tmp_path:
     sc = sumo.resolve_scenario("rural_loop")
     runs = {}
     for margin in (0.0, 3.0):
-        run = SumoRun(sc, RunOptions(end_s=150, progress=False, border_margin_m=margin), tmp_path / f"m{margin:g}")
+        run = SumoRun(sc, RunOptions(end_s=150, progress=False, border_margin_m=margin, corridor="lane"), tmp_path / f"m{margin:g}")
         runs[margin] = (run, run.run())
     (narrow_run, narrow), (wide_run, wide) = runs[0.0], runs[3.0]
     assert wide.summary["border_margin_m"] == 3.0

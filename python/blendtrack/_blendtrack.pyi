@@ -112,6 +112,8 @@ class ControllerConfig:
     border_margin_m: float
     ray_horizon_m: float
     emergency_deceleration: float
+    curve_lateral_accel: float
+    curve_deceleration: float
     alpha_mode: str
     auto_alpha_forward: float
     auto_alpha_backward: float

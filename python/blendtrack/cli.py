@@ -328,6 +328,7 @@ def _run_options(args: argparse.Namespace, **extra: Any) -> Any:
         vehicle=vehicle,
         fixed_keys=frozenset(keys),
         border_margin_m=args.border_margin,
+        corridor=args.corridor,
         stop_at_route_end=args.stop_at_route_end,
         tactical_lane_changes=args.tactical_lane_changes,
         control_dt_s=args.control_dt,
@@ -465,6 +466,15 @@ def _add_driving_options(parser: argparse.ArgumentParser) -> None:
         default=0.0,
         metavar="M",
         help="widen the virtual borders by M metres on each side of the lane (>= 0; default 0: the lane's width)",
+    )
+    parser.add_argument(
+        "--corridor",
+        choices=("lane", "arc", "carriageway"),
+        default="lane",
+        help="what limits the speed in curves: lane (default) the paper's virtual borders at the lane's half width and its "
+        "ray cast; arc the curve speeds sqrt(a_y / |curvature|) previewed along "
+        "the path, a_y = curve_lateral_accel of --config or the scenario's comfort bound (2 m/s^2 unless its scenario.toml "
+        "says otherwise); carriageway the paper's ray cast with the borders at the edges of the whole road (docs/sumo.md)",
     )
     parser.add_argument(
         "--stop-at-route-end",

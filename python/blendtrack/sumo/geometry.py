@@ -375,6 +375,7 @@ def route_geometry(
     defer_changes: bool = False,
     change: tuple[float, float] | tuple[float, float, int] | None = None,
     border_margin_m: float = 0.0,
+    carriageway: bool = False,
 ) -> RouteGeometry:
     """Builds the reference track of a vehicle on ``edges`` starting in lane ``start_lane_index``.
 
@@ -387,7 +388,9 @@ def route_geometry(
     with ``defer_changes`` the track may stop at the end of a lane that does
     not continue, and ``pending_change`` says where and to which lane. The
     widths (the virtual borders) are each lane's half width plus
-    ``border_margin_m``.
+    ``border_margin_m``; with ``carriageway`` a normal lane's are the
+    distances to the edges of its whole edge (junction lanes keep their half
+    width; a lane change's are the carriageway's anyway).
     Raises :class:`blendtrack.PathError` for an empty or undrivable route.
     """
     if len(edges) == 0:
@@ -422,7 +425,11 @@ def route_geometry(
                 if not math.isinf(stops[j][5]):
                     break
                 stops[j] = (*stops[j][:5], joined["entry_s"][k])
-        if pc.widths is not None:
+        if carriageway and pc.on_lane and not pc.lane.startswith(":"):
+            # On its lane (also after a change: no taper back to the lane's).
+            lane = net.getLane(pc.lane)
+            wid.append(_carriageway_widths(lane, lane, np.zeros(n)) + border_margin_m)
+        elif pc.widths is not None:
             wid.append(pc.widths[len(pc.widths) - n:] + border_margin_m)
         else:
             wid.append(np.full((n, 2), pc.half_width_m + border_margin_m))

@@ -11,6 +11,10 @@ from blendtrack import ControllerConfig, VehicleParams
 from blendtrack.sumo.scenario import ScenarioError
 
 
+#: The corridors a SUMO run can use (``RunOptions.corridor``).
+CORRIDORS = ("lane", "arc", "carriageway")
+
+
 @dataclass
 class RunOptions:
     """What a run controls and how (see ``blendtrack sumo run --help``)."""
@@ -61,6 +65,13 @@ class RunOptions:
     #: let the ray cast see further through a curve, so the curvature-aware
     #: law slows a vehicle less there.
     border_margin_m: float = 0.0
+    #: What limits the speed in curves (docs/sumo.md, "Curves"): "arc" the curve speeds sqrt(a_y / |kappa|) previewed along the
+    #: path, a_y = the config's ``curve_lateral_accel`` when set, else the
+    #: scenario's comfort bound on lateral acceleration; "lane" (the default) the paper's
+    #: virtual borders at the lane's half width (plus ``border_margin_m``) and
+    #: its ray cast; "carriageway" the same ray cast with the borders at the
+    #: edges of the lane's whole edge (junction lanes keep their half width).
+    corridor: str = "lane"
     #: Stop at the end of the route (a standing obstacle there). By default
     #: controlled vehicles, like SUMO's drivers (``arrivalSpeed="current"``),
     #: leave the network at their route's end without slowing down.
@@ -83,6 +94,8 @@ class RunOptions:
         m = self.border_margin_m
         if not (isinstance(m, (int, float)) and math.isfinite(m) and m >= 0.0):
             raise ScenarioError(f"border margin {m!r} m: must be a finite number >= 0")
+        if self.corridor not in CORRIDORS:
+            raise ScenarioError(f"corridor {self.corridor!r}: must be one of {', '.join(CORRIDORS)}")
         c = self.control_dt_s
         if not (isinstance(c, (int, float)) and math.isfinite(c) and c > 0.0):
             raise ScenarioError(f"control dt {c!r} s: must be a finite number > 0")

@@ -119,7 +119,7 @@ class SumoRun:
             control_dt_s=options.control_dt_s,
         )
         self.network = Network(scenario.net_file)
-        self.tracks = Tracks(self.fleet, self.network, base_config, options.border_margin_m)
+        self.tracks = Tracks(self.fleet, self.network, base_config, options.border_margin_m, options.corridor)
         self.vehicles = Controlled(self.conn, self.selection, self.tracks, self.fleet, options)
         #: The controlled vehicles by id, and the records of all taken over.
         self.active = self.vehicles.active
@@ -222,6 +222,7 @@ class SumoRun:
             "steps_per_second": steps / wall if wall > 0 else math.nan,
             "comfort_lateral_accel_mps2": self.scenario.comfort_lateral_accel_mps2,
             "border_margin_m": self.opt.border_margin_m,
+            "corridor": self.opt.corridor,
             "stop_at_route_end": self.opt.stop_at_route_end,
             "tactical_lane_changes_enabled": self.opt.tactical_lane_changes,
             "moves_speed_only": self.moves["speed"],

@@ -61,6 +61,11 @@ class Selection:
         )
         self.base_vehicle = options.vehicle or VehicleParams()
         self.base_config = self.base_config.with_alpha(options.alpha)
+        if "curve_lateral_accel" not in options.fixed_keys:
+            # The arc corridor keeps to the scenario's comfort bound; the
+            # others are the paper's ray cast (curve_lateral_accel 0).
+            a_y = conn.scenario.comfort_lateral_accel_mps2 if options.corridor == "arc" else 0.0
+            self.base_config = self.base_config.replace(curve_lateral_accel=a_y)
         self._types: dict[str, dict[str, Any]] = {}
         #: The vTypes --controlled-type stands for (a distribution: its members).
         self.controlled_types: set[str] = set()

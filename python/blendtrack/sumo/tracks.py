@@ -77,11 +77,15 @@ class Active:
 class Tracks:
     """The tracks registered with ``fleet`` and the interned lane, edge and light ids."""
 
-    def __init__(self, fleet: RouteFleet, network: Network, config: ControllerConfig, border_margin_m: float) -> None:
+    def __init__(
+        self, fleet: RouteFleet, network: Network, config: ControllerConfig, border_margin_m: float, corridor: str = "lane"
+    ) -> None:
         self.fleet = fleet
         self.network = network
         self.config = config
         self.border_margin_m = border_margin_m
+        #: "carriageway": the virtual borders at the edges of each lane's whole edge.
+        self.carriageway = corridor == "carriageway"
         #: (edges, lane index) -> the shared track of that route from that lane.
         self.geo_cache: dict[_Key, tuple[RouteGeometry, int]] = {}
         #: Shared track -> its key in geo_cache, and the vehicles on it.
@@ -106,6 +110,7 @@ class Tracks:
             geo = route_geometry(
                 network.net(), edges, lane_index, defer_changes=True, change=change,
                 border_margin_m=self.border_margin_m,
+                carriageway=self.carriageway,
             )
             path = blendtrack.Path(geo.points, geo.widths, closed=False)
             lanes, edge_ids = self.lanes, self.edges

@@ -102,6 +102,14 @@ pub struct ControllerConfig {
     /// stopping there needs, down to this (never gentler than b_l). A
     /// passenger car's emergency braking is about 9 m/s^2.
     pub emergency_deceleration: f64,
+    /// Lateral acceleration (m/s^2, >= 0) of the curve speeds
+    /// `sqrt(curve_lateral_accel / |kappa|)` previewed along the path
+    /// ([`crate::curve_speed`]); 0 (the default, the paper's law) keeps the
+    /// ray cast. When > 0 the curve speeds replace the virtual obstacle.
+    pub curve_lateral_accel: f64,
+    /// Deceleration (m/s^2, < 0) at which curve speeds are previewed: a
+    /// vehicle brakes for a curve ahead at about this much.
+    pub curve_deceleration: f64,
 
     // ---- Automatic alpha (beyond the paper; see `lateral::auto_alpha`) ----
     /// "fixed" (default) or "auto".
@@ -154,6 +162,8 @@ impl Default for ControllerConfig {
             pure_pursuit_min_lookahead_m: 3.0,
             use_path_widths: true,
             emergency_deceleration: -9.0,
+            curve_lateral_accel: 0.0,
+            curve_deceleration: -2.0,
             border_margin_m: 0.0,
             ray_horizon_m: 200.0,
             alpha_mode: AlphaMode::Fixed,
@@ -269,6 +279,8 @@ impl ControllerConfig {
         positive("auto_alpha_large_error_m", self.auto_alpha_large_error_m)?;
         non_negative("auto_alpha_error_gain", self.auto_alpha_error_gain)?;
         negative("emergency_deceleration", self.emergency_deceleration)?;
+        non_negative("curve_lateral_accel", self.curve_lateral_accel)?;
+        negative("curve_deceleration", self.curve_deceleration)?;
         Ok(())
     }
 }

@@ -8,6 +8,7 @@
 //! of the control point `P(alpha)` that studies report.
 
 use crate::config::{validate_vehicle, AlphaMode, ControllerConfig, LateralKind};
+use crate::curve_speed::{curve_accel, CurveProfile};
 use crate::error::{ConfigError, StateError};
 use crate::lateral::{
     auto_alpha, blend, lookahead_forcing, pure_pursuit_command, rear_command, stanley_command,
@@ -19,18 +20,25 @@ use crate::vehicle::{VehicleParams, VehicleState};
 use nalgebra::{Point2, Vector2};
 use std::sync::Arc;
 
-/// A path and its virtual borders.
+/// A path, its virtual borders and its curvature profile.
 #[derive(Debug, Clone)]
 pub struct Track {
     pub path: Path,
     pub corridor: Corridor,
+    /// For the curve speeds (`curve_lateral_accel` > 0).
+    pub curves: CurveProfile,
 }
 
 impl Track {
     /// Builds the borders from the path's widths or `cfg.path_width_m`.
     pub fn new(path: Path, cfg: &ControllerConfig) -> Self {
         let corridor = Corridor::new(&path, cfg);
-        Track { path, corridor }
+        let curves = CurveProfile::new(&path);
+        Track {
+            path,
+            corridor,
+            curves,
+        }
     }
 }
 
@@ -271,26 +279,36 @@ impl Controller {
         self.hint_segments = [rear.segment, front.segment, cp.segment];
         let th_travel = travel_heading(measured.theta_rad, dir);
 
-        // Crossings beyond the relevance distance cannot change the command.
-        let horizon = self
-            .cfg
-            .ray_horizon_m
-            .min(relevance_distance(speed, &self.cfg) + 2.0 * track.corridor.max_width() + 5.0);
-        // Forward, the ray runs along the heading: its (cos, sin) is `h`.
-        let u = match dir {
-            crate::vehicle::Direction::Forward => h,
-            crate::vehicle::Direction::Backward => Vector2::new(th_travel.cos(), th_travel.sin()),
+        let (d_obs, accel) = if self.cfg.curve_lateral_accel > 0.0 {
+            // Curve speeds previewed along the arc instead of the virtual obstacle.
+            let lon = longitudinal_accel(speed, None, obstacles, &self.cfg);
+            let curve = curve_accel(&track.curves, rear.s, speed, &self.cfg);
+            (None, lon.accel_mps2.min(curve))
+        } else {
+            // Crossings beyond the relevance distance cannot change the command.
+            let horizon = self
+                .cfg
+                .ray_horizon_m
+                .min(relevance_distance(speed, &self.cfg) + 2.0 * track.corridor.max_width() + 5.0);
+            // Forward, the ray runs along the heading: its (cos, sin) is `h`.
+            let u = match dir {
+                crate::vehicle::Direction::Forward => h,
+                crate::vehicle::Direction::Backward => {
+                    Vector2::new(th_travel.cos(), th_travel.sin())
+                }
+            };
+            let d_obs = self
+                .track
+                .corridor
+                .ray_cast_along(path, &rear_pt, &u, rear.s, horizon);
+            let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
+            (d_obs, lon.accel_mps2)
         };
-        let d_obs = self
-            .track
-            .corridor
-            .ray_cast_along(path, &rear_pt, &u, rear.s, horizon);
-        let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
         // A finite state within range gives a finite command; should a
         // corner of the geometry still overflow, say so rather than return NaN.
         for (field, value) in [
             ("steering command", steering),
-            ("acceleration command", lon.accel_mps2),
+            ("acceleration command", accel),
         ] {
             if !value.is_finite() {
                 return Err(StateError::NonFinite { field, value });
@@ -298,7 +316,7 @@ impl Controller {
         }
         Ok(ControlOutput {
             steering_rad: steering,
-            accel_mps2: lon.accel_mps2,
+            accel_mps2: accel,
             alpha,
             steering_front_rad: d_front,
             steering_rear_rad: d_rear,

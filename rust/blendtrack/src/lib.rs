@@ -5,7 +5,8 @@
 //! project's SPEC: a front-axle Stanley command and a rear-axle
 //! curvature-based geometric command blended with a barycentric weight
 //! `alpha` in [0, 1] ([`lateral`]), a curvature-aware longitudinal law built
-//! on virtual borders and a ray cast ([`longitudinal`]), the reference
+//! on virtual borders and a ray cast ([`longitudinal`]), or on curve
+//! speeds previewed along the path ([`curve_speed`], for roads), the reference
 //! [`path`] they track, a kinematic bicycle [`vehicle`] with actuator limits,
 //! delay and sensor noise, a closed-loop [`sim`]ulator with its [`metrics`],
 //! one accumulator of a drive's statistics ([`stats`]), and a batch
@@ -24,6 +25,7 @@
 
 pub mod config;
 pub mod controller;
+pub mod curve_speed;
 pub mod error;
 pub mod fleet;
 pub mod lateral;
