@@ -73,7 +73,7 @@ INCOMPLETE = "INCOMPLETE"
 #: What a run writes (removed at the start, so no earlier run's file is left
 #: beside a new run's partial outputs).
 OUTPUTS = (
-    "summary.json", "vehicles.csv", "collisions.csv", "trace.csv", "alpha.png", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
+    "summary.json", "vehicles.csv", "collisions.csv", "trace.csv", "lateral_error_hist.png", "speed_vs_curvature.png", "trajectory.png",
     "sumo/tripinfo.xml", "sumo/collisions.xml", "sumo/sumo.log", "sumo/fcd.xml", "sumo/ssm.xml",
 )
 
@@ -108,7 +108,6 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     report.write_vehicles_csv(result.records, out / "vehicles.csv")
     if options.trace:
         run.write_trace(out / "trace.csv")
-        report.plot_alpha(out / "trace.csv", out / "alpha.png")
     report.plot_run(result, out, scenario.comfort_lateral_accel_mps2)
     report.write_json(result.summary, out / "summary.json")
     marker.unlink()

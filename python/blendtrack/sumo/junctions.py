@@ -70,7 +70,9 @@ class Junctions:
             for link in self.conn.sumo.vehicle.getNextLinks(vid):
                 # (lane, has priority, is open, has foe, via lane, state, direction, length)
                 if link[4] == via:
-                    if (not link[1]) and bool(link[3]):
+                    # A zipper link (state Z) is taken in turns, not waited
+                    # at: the order comes from ``Zippers`` as a soft leader.
+                    if (not link[1]) and bool(link[3]) and link[5] != "Z":
                         return True
                     break
             inner, offset = self.network.waiting_point_after(via)

@@ -69,6 +69,7 @@ from blendtrack.sumo.scenario import Scenario
 from blendtrack.sumo.selection import Selection, parse_ids
 from blendtrack.sumo.tracks import Active, Tracks
 from blendtrack.sumo.vehicles import LEADER_RANGE_M, Controlled
+from blendtrack.sumo.zipper import Zippers
 
 __all__ = ["RunOptions", "RunResult", "SumoRun", "VehicleRecord", "loads_ok_marker", "parse_ids", "sumo_binary"]
 
@@ -124,6 +125,7 @@ class SumoRun:
         self.histograms = SampleHistograms()
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel)
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel)
+        self.zippers = Zippers(self.conn, self.network, self.tracks, self.active)
         self.trace = Trace()
         self._seen: set[str] = set()
         self._background: set[str] = set()
@@ -209,6 +211,7 @@ class SumoRun:
             "courtesy_steps": lanes["courtesy_steps"],
             "merge_lead_steps": lanes["merge_lead_steps"],
             "tactical_lane_changes": lanes["tactical_lane_changes"],
+            "zipper_steps": self.zippers.counts["zipper_steps"],
         }
 
     def _loop(self, end: float | None) -> int:
@@ -289,13 +292,14 @@ class SumoRun:
         if self.conn.has_tls:
             self.junctions.refresh_tls()
         (asked, leaders), read, lanes, poss = self._observe(t)
+        self.lanes.add_merge_leads(self.zippers.leaders(self.vehicles.order))
         # This step's courtesy and lining-up targets are taken (and cleared)
         # even when no controlled vehicle is left to step.
         soft = self.lanes.soft_leaders(self.vehicles.index) if self.lanes.has_soft_leaders() else None
         if not self.vehicles.ids:
             return
         ids, order, fleet = self.vehicles.ids, self.vehicles.order, self.fleet
-        queries = fleet.plan_sumo(self.vehicles.slots, leaders, self.conn.get_speed, read, lanes, poss, asked, soft).tolist()
+        queries = fleet.plan_sumo(self.vehicles.slots, leaders, self.conn.step_speed, read, lanes, poss, asked, soft).tolist()
         must_yield = self.junctions.must_yield
         answers = [must_yield(ids[i], order[i].slot) for i in queries]
         out = fleet.step(np.array(answers, dtype=bool), self.conn.dt)

@@ -60,7 +60,10 @@ class Selection:
             use_path_widths="path_width_m" not in options.fixed_keys
         )
         self.base_vehicle = options.vehicle or VehicleParams()
-        self.base_config = self.base_config.with_alpha(options.alpha)
+        if options.alpha == "auto":
+            self.base_config = self.base_config.replace(alpha_mode="auto")
+        elif options.alpha is not None:
+            self.base_config = self.base_config.replace(lat_blend_factor=options.alpha, alpha_mode="fixed")
         self._types: dict[str, dict[str, Any]] = {}
         #: The vTypes --controlled-type stands for (a distribution: its members).
         self.controlled_types: set[str] = set()
