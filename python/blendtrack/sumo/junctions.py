@@ -63,6 +63,11 @@ class Junctions:
         if stop is None:
             return False
         via = self.tracks.lanes.name(stop[4])
+        if self.network.is_zipper(via):
+            # Taken in turns, not waited at: the order comes from ``Zippers``
+            # as a soft leader (a zipper link without a light is listed
+            # among the internal waiting points too: link index -1).
+            return self.junction_blocked(vid, via)
         if via in self.network.internal_vias:
             if self.internal_junction_busy(vid, via):
                 return True
@@ -70,9 +75,7 @@ class Junctions:
             for link in self.conn.sumo.vehicle.getNextLinks(vid):
                 # (lane, has priority, is open, has foe, via lane, state, direction, length)
                 if link[4] == via:
-                    # A zipper link (state Z) is taken in turns, not waited
-                    # at: the order comes from ``Zippers`` as a soft leader.
-                    if (not link[1]) and bool(link[3]) and link[5] != "Z":
+                    if (not link[1]) and bool(link[3]):
                         return True
                     break
             inner, offset = self.network.waiting_point_after(via)

@@ -20,14 +20,6 @@ from blendtrack.sumo.tracks import Active, Tracks
 #: foe at the planning deceleration of 4 m/s^2 from a speed difference of
 #: up to 18 m/s (v^2 / 2b = 40 m, the rest is the gap).
 ZIPPER_RANGE_M = 120.0
-#: A foe SUMO drives that is level with a controlled vehicle (their distances
-#: to the merge point within the controlled vehicle's length plus this, in m)
-#: counts as ahead: SUMO's zipper orders by arrival time, not distance, and
-#: both taking the lead would meet at the merge point. A controlled foe
-#: counts only when strictly closer (the tie goes one way, no deadlock).
-ZIPPER_LEVEL_MARGIN_M = 2.5
-
-
 class Zippers:
     """Soft leaders for controlled vehicles approaching a zipper merge."""
 
@@ -118,14 +110,15 @@ class Zippers:
             if near is None:
                 continue
             via, own = near
-            own_len = float(v.getLength(act.vid))
             best: tuple[str, float] | None = None
             for lane, offset in self._zips[via][1]:  # type: ignore[index]
                 lane_len = float(self.network.net().getLane(lane).getLength())
                 for other in self.conn.vehicles_on(lane):
                     dist = lane_len - float(v.getLanePosition(other)) + offset
-                    level = own_len + ZIPPER_LEVEL_MARGIN_M if other not in self.active else 0.0
-                    if dist >= own + level or (best is not None and dist <= best[1]):
+                    # Closer to the merge point goes first, as SUMO's drivers
+                    # order themselves (a margin for SUMO's foes, to be safe,
+                    # had both sides of a level pair waiting for the other).
+                    if dist >= own or (best is not None and dist <= best[1]):
                         continue
                     best = (other, dist)
             if best is not None:

@@ -190,6 +190,9 @@ struct Driven {
     known: Option<(u32, f64)>,
     /// The speed last sent to the simulator (NaN before the first).
     sumo_speed: f64,
+    /// The speed a follower holds this vehicle at over the next step (see
+    /// [`substep::braking_mean_speed`]); NaN before its first step.
+    lead_speed: f64,
     /// Simulator steps the vehicle was moved in (its statistics count
     /// control steps, more than these when a step is sub-stepped).
     steps: u64,
@@ -357,6 +360,7 @@ impl RouteFleet {
             holding: None,
             known: None,
             sumo_speed: f64::NAN,
+            lead_speed: f64::NAN,
             steps: 0,
             stats: DriveStats::default(),
         });

@@ -7,8 +7,8 @@ use crate::placement::{choose_move, Motion, Move};
 use crate::plan::Plan;
 use crate::signal::{signal_at, Signal};
 use crate::substep::{
-    advance, control_record, held_speed, past_route_end, state_at, stepped_finite, substeps,
-    HeldGaps, LastStep,
+    advance, braking_mean_speed, control_record, held_speed, past_route_end, state_at,
+    stepped_finite, substeps, HeldGaps, LastStep,
 };
 use crate::{Driven, RouteFleet, TrafficError};
 use blendtrack::path::wrap_angle;
@@ -275,7 +275,9 @@ impl RouteFleet {
                 }
             }
             // Over the whole step (the last control step's with one).
-            r.accel_mps2.push((v - d.state.v_mps) / dt_s);
+            let accel = (v - d.state.v_mps) / dt_s;
+            r.accel_mps2.push(accel);
+            d.lead_speed = braking_mean_speed(v, accel, dt_s);
             d.steps += 1;
             d.state = state;
             d.s_front_m = sf_new;
