@@ -17,6 +17,11 @@ from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 
 # True once this process has started a libsumo simulation (see SumoConnection.start).
+#: The shortest SUMO step (s) over which a braking leader SUMO drives is held
+#: at its mean speed (``SumoConnection.step_speed``; the traffic engine's
+#: ``HOLD_BRAKING_MIN_STEP_S`` for the ones it drives).
+HOLD_BRAKING_MIN_STEP_S = 0.5
+
 _LIBSUMO_STARTED = False
 
 
@@ -272,12 +277,16 @@ class SumoConnection:
         30 collisions, the leader braking at 2-4 m/s^2 step after step).
         Held at the mean speed it is never ahead of where it gets braking so
         (``v t`` with ``v = v0 + a dt / 2`` against ``v0 t + a t^2 / 2``, for
-        ``t`` up to ``dt``)."""
+        ``t`` up to ``dt``). Only at steps of ``HOLD_BRAKING_MIN_STEP_S`` or
+        more, as the traffic engine does for the leaders it drives (see
+        ``braking_mean_speed`` there)."""
         v = float(self.get_speed(vid))
+        dt = self.dt
+        if not dt >= HOLD_BRAKING_MIN_STEP_S:
+            return v
         a = float(self.get_accel(vid))
         if not a < 0.0 or not v > 0.0:
             return v
-        dt = self.dt
         if v + a * dt <= 0.0:
             return v * v / (-2.0 * a) / dt  # it stops within the step
         return v + 0.5 * a * dt

@@ -34,6 +34,10 @@ pub(crate) fn held_speed(v_mps: f64) -> f64 {
     }
 }
 
+/// The shortest simulator step (s) over which a braking leader is held at
+/// its mean speed ([`braking_mean_speed`]).
+pub(crate) const HOLD_BRAKING_MIN_STEP_S: f64 = 0.5;
+
 /// The speed to hold a leader at over a step of `dt_s`, given its speed
 /// `v_mps` and its acceleration over the last step: its mean speed over the
 /// step if it goes on braking so (stopping within the step, if it does),
@@ -42,9 +46,13 @@ pub(crate) fn held_speed(v_mps: f64) -> f64 {
 /// every control step against where the leader is not, ran into it; at the
 /// mean speed it is never ahead of where it gets braking so (`v t` with
 /// `v = v0 + a dt / 2` against `v0 t + a t^2 / 2`, for `t` up to `dt`).
-/// The simulator's drivers get the same from the bridge.
+/// The simulator's drivers get the same from the bridge. Only for steps of
+/// [`HOLD_BRAKING_MIN_STEP_S`] or more: below, the speed hold is off by at
+/// most `a dt^2 / 2` (2 cm at 0.1 s and 4.5 m/s^2), and the mean speed, fed
+/// from follower to follower down a platoon, cost the highway with every
+/// vehicle controlled 7 of its 151 arrivals in 300 s.
 pub(crate) fn braking_mean_speed(v_mps: f64, accel_mps2: f64, dt_s: f64) -> f64 {
-    if !(accel_mps2 < 0.0 && v_mps > 0.0 && dt_s > 0.0) {
+    if !(accel_mps2 < 0.0 && v_mps > 0.0 && dt_s >= HOLD_BRAKING_MIN_STEP_S) {
         return v_mps;
     }
     if v_mps + accel_mps2 * dt_s <= 0.0 {
@@ -386,12 +394,14 @@ mod tests {
         assert_eq!(braking_mean_speed(10.0, 1.5, 1.0), 10.0);
         assert_eq!(braking_mean_speed(0.0, -3.0, 1.0), 0.0);
         assert_eq!(braking_mean_speed(10.0, f64::NAN, 1.0), 10.0);
+        // Short steps: held at its speed.
+        assert_eq!(braking_mean_speed(10.0, -4.5, 0.1), 10.0);
         // Held at it over the step, the leader is never ahead of where it
         // gets going on braking so (the follower's side of safety).
         for &(v, a, dt) in &[
             (30.0, -4.5, 1.0),
             (5.0, -9.0, 1.0),
-            (12.0, -1.0, 0.1),
+            (12.0, -1.0, 0.5),
             (2.0, -4.0, 1.0),
         ] {
             let held = braking_mean_speed(v, a, dt);
