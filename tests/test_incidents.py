@@ -38,10 +38,13 @@ def test_every_collision_is_read_with_who_and_whether_a_controlled_vehicle_was_i
 
 @pytest.mark.skipif(not REAL.is_dir(), reason="../shared/scenarios_real is not beside the repo")
 def test_a_run_counts_what_sumo_recorded(tmp_path: Path) -> None:
-    # Eccles at its own 1 s step: SUMO's drivers collide there within a minute.
+    # Eccles at its own 1 s step with one control step per SUMO step (the
+    # behaviour before sub-steps): a collision within a minute. With the
+    # default control rate the merge work of issue 18 left none there.
     out = tmp_path / "o"
     proc = subprocess.run([sys.executable, "-m", "blendtrack.cli", "sumo", "run", str(REAL / "eccles_interchange" / "interchangeSim.cfg"),
-                           "--controlled-fraction", "0.3", "--end", "60", "--quiet", "--out", str(out)], capture_output=True, text=True, timeout=300)
+                           "--controlled-fraction", "0.3", "--control-dt", "1", "--end", "60", "--quiet", "--out", str(out)],
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     summary = json.loads((out / "summary.json").read_text())
     xml = (out / "sumo" / "collisions.xml").read_text()

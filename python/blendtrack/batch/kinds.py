@@ -70,11 +70,9 @@ def _split(params: dict[str, Any]) -> tuple[Any, Any, set[str]]:
     cfg_fields = set(config.to_dict())
     veh_fields = set(vehicle.to_dict())
     cfg = {k: v for k, v in params.items() if k in cfg_fields}
-    config = config.replace(**cfg).with_alpha(params.get("alpha"))
     if "alpha" in params:
-        cfg["alpha_mode"] = config.alpha_mode
-        if params["alpha"] != "auto":
-            cfg["lat_blend_factor"] = params["alpha"]
+        cfg["lat_blend_factor"] = params["alpha"]
+    config = config.replace(**cfg)
     vehicle = vehicle.replace(**{k: v for k, v in params.items() if k in veh_fields})
     return config, vehicle, keys | set(cfg)
 

@@ -98,6 +98,11 @@ class Junctions:
             # Told to wait it stood there, in the crossing road's way.
             return False
         via = self.tracks.lanes.name(stop[4])
+        if self.network.is_zipper(via):
+            # Taken in turns, not waited at: the order comes from ``Zippers``
+            # as a soft leader (a zipper link without a light is listed
+            # among the internal waiting points too: link index -1).
+            return self.junction_blocked(vid, via)
         if via in self.network.internal_vias:
             if self.internal_junction_busy(vid, via):
                 return True

@@ -49,6 +49,10 @@ CHANGE_AXLE_BEHIND_M = 2.0
 # nearer ones drive on. SUMO's drivers do the like for each other (LC2013's
 # cooperative speed adaptation), but not for vehicles blendtrack drives.
 COURTESY_DECEL_MPS2 = 2.0
+# A vehicle waiting to change lanes falls back behind one alongside on the
+# target lane whose front is behind its own only while that one moves at
+# this speed (m/s) or more (``LaneChanges.wait_for_gap``).
+ALONGSIDE_MOVING_MPS = 1.0
 COURTESY_RANGE_M = 150.0
 # Lane changes the route does not need: every TACTICAL_CHECK_EVERY steps
 # (staggered over the vehicles) SUMO's lane-change model (LC2013, whose state
@@ -273,7 +277,11 @@ class LaneChanges:
         v = self.conn.sumo.vehicle
         side = 1 if direction < 0 else 0
         near = [(nid, max(gap, 0.0)) for nid, gap in v.getNeighbors(vid, 2 | side)]
-        near += [(nid, 0.0) for nid, gap in v.getNeighbors(vid, side) if gap < 0.0]
+        # Not behind one alongside but behind it, standing or crawling: it
+        # is no traffic to keep level with, and two vehicles each waiting
+        # to change onto the other's lane stood level for good (Eccles:
+        # 300 s, the queue behind both with them).
+        near += [(nid, 0.0) for nid, gap in v.getNeighbors(vid, side) if gap < 0.0 and float(v.getSpeed(nid)) >= ALONGSIDE_MOVING_MPS]
         lead = None
         for cand in near:
             lead = self.tighter_leader(lead, cand)
@@ -311,6 +319,12 @@ class LaneChanges:
                 return
 
     # ------------------------------------------------------------- soft leaders
+    def add_merge_leads(self, leads: list[tuple[str, tuple[str, float]]]) -> None:
+        """More vehicles to line up behind this step (vehicle, (leader, gap)),
+        e.g. the foe ahead at a zipper merge; with one already there, the tighter."""
+        for vid, lead in leads:
+            self._merge_leads[vid] = self.tighter_leader(self._merge_leads.get(vid), lead)
+
     def has_soft_leaders(self) -> bool:
         return bool(self._courtesy or self._merge_leads)
 

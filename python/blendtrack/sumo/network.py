@@ -60,6 +60,11 @@ class Network:
                             self._conn_of_via[part.getID()] = c
         return self._conn_of_via.get(via)
 
+    def is_zipper(self, via: str) -> bool:
+        """Is ``via`` a junction lane of a zipper link (state Z)?"""
+        c = self.connection_of(via)
+        return c is not None and c.getState() == "Z"
+
     def junction_lanes(self, via: str) -> tuple[np.ndarray, tuple[str, ...]]:
         """The path (points) through the junction from the junction lane
         ``via`` on, and the junction's other lanes that come within

@@ -72,6 +72,7 @@ from blendtrack.sumo.selection import Selection, parse_ids
 from blendtrack.sumo.stops import Stops
 from blendtrack.sumo.tracks import Active, Tracks
 from blendtrack.sumo.vehicles import LEADER_RANGE_M, Controlled, SumoLeaders
+from blendtrack.sumo.zipper import Zippers
 
 __all__ = ["RunOptions", "RunResult", "SumoRun", "VehicleRecord", "loads_ok_marker", "parse_ids", "sumo_binary"]
 
@@ -131,6 +132,7 @@ class SumoRun:
         self.stops = Stops(self.conn, self.fleet, self.network)
         obs_decel = base_config.max_obs_deceleration if "max_obs_deceleration" in options.fixed_keys else base_config.max_deceleration
         self.sumo_leaders = SumoLeaders(self.conn, self.active, max(abs(float(obs_decel)), 0.5))
+        self.zippers = Zippers(self.conn, self.network, self.tracks, self.active)
         self.trace = Trace()
         #: The vehicles in the simulation whose departure was seen (an id
         #: goes when its vehicle arrives, so the set stays as small as the traffic).
@@ -239,6 +241,7 @@ class SumoRun:
             "tactical_lane_changes": lanes["tactical_lane_changes"],
             **self.stops.counts,
             **self.incidents.summary(),
+            "zipper_steps": self.zippers.counts["zipper_steps"],
         }
 
     def _loop(self, end: float | None) -> int:
@@ -334,6 +337,7 @@ class SumoRun:
         if self.conn.has_tls:
             self.junctions.refresh_tls()
         (asked, leaders), read, lanes, poss = self._observe(t)
+        self.lanes.add_merge_leads(self.zippers.leaders(self.vehicles.order))
         # This step's courtesy and lining-up targets are taken (and cleared)
         # even when no controlled vehicle is left to step.
         soft = self.lanes.soft_leaders(self.vehicles.index) if self.lanes.has_soft_leaders() else None
@@ -342,7 +346,7 @@ class SumoRun:
         if self.stops.pending:
             self.stops.update()
         ids, order, fleet = self.vehicles.ids, self.vehicles.order, self.fleet
-        queries = fleet.plan_sumo(self.vehicles.slots, leaders, self.conn.get_speed, read, lanes, poss, asked, soft).tolist()
+        queries = fleet.plan_sumo(self.vehicles.slots, leaders, self.conn.step_speed, read, lanes, poss, asked, soft).tolist()
         must_yield = self.junctions.must_yield
         answers = [must_yield(ids[i], order[i].slot) for i in queries]
         out = fleet.step(np.array(answers, dtype=bool), self.conn.dt)

@@ -195,6 +195,9 @@ struct Driven {
     /// Arc length where the caller wants the front to stop (a SUMO
     /// `<stop>`), NaN when none; see [`RouteFleet::set_halt`].
     halt_m: f64,
+    /// The speed a follower holds this vehicle at over the next step (see
+    /// [`substep::braking_mean_speed`]); NaN before its first step.
+    lead_speed: f64,
     /// Simulator steps the vehicle was moved in (its statistics count
     /// control steps, more than these when a step is sub-stepped).
     steps: u64,
@@ -395,6 +398,7 @@ impl RouteFleet {
             known: None,
             sumo_speed: f64::NAN,
             halt_m: f64::NAN,
+            lead_speed: f64::NAN,
             steps: 0,
             stats: DriveStats::default(),
         });

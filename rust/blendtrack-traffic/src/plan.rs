@@ -79,7 +79,13 @@ impl RouteFleet {
             .ok()
             .and_then(|l| self.driven.get(l))
             .and_then(Option::as_ref)
-            .map_or(given, |d| d.state.v_mps)
+            .map_or(given, |d| {
+                if d.lead_speed.is_finite() {
+                    d.lead_speed
+                } else {
+                    d.state.v_mps
+                }
+            })
     }
 
     /// First half of a step: stop lines and leaders. Returns the indices (into

@@ -7,8 +7,8 @@ use crate::placement::{choose_move, Motion, Move};
 use crate::plan::Plan;
 use crate::signal::{signal_at, Signal};
 use crate::substep::{
-    advance, control_record, held_speed, past_route_end, state_at, stepped_finite, substeps,
-    HeldGaps, LastStep,
+    advance, braking_mean_speed, control_record, held_speed, past_route_end, state_at,
+    stepped_finite, substeps, HeldGaps, LastStep,
 };
 use crate::{Driven, RouteFleet, TrafficError};
 use blendtrack::path::wrap_angle;
@@ -34,8 +34,6 @@ pub struct RouteOutputs {
     pub theta_rad: Vec<f64>,
     pub v_mps: Vec<f64>,
     pub delta_rad: Vec<f64>,
-    /// The blend factor the controller used (the last control step's).
-    pub alpha: Vec<f64>,
     pub accel_mps2: Vec<f64>,
     pub lateral_error_m: Vec<f64>,
     /// The body is past the route's end (the track ends there: the lateral
@@ -77,7 +75,6 @@ impl RouteOutputs {
             theta_rad: Vec::with_capacity(n),
             v_mps: Vec::with_capacity(n),
             delta_rad: Vec::with_capacity(n),
-            alpha: Vec::with_capacity(n),
             accel_mps2: Vec::with_capacity(n),
             lateral_error_m: Vec::with_capacity(n),
             past_route_end: Vec::with_capacity(n),
@@ -284,7 +281,9 @@ impl RouteFleet {
                 }
             }
             // Over the whole step (the last control step's with one).
-            r.accel_mps2.push((v - d.state.v_mps) / dt_s);
+            let accel = (v - d.state.v_mps) / dt_s;
+            r.accel_mps2.push(accel);
+            d.lead_speed = braking_mean_speed(v, accel, dt_s);
             d.steps += 1;
             d.state = state;
             d.s_front_m = sf_new;
@@ -307,7 +306,6 @@ impl RouteFleet {
         r.theta_rad.push(th);
         r.v_mps.push(v);
         r.delta_rad.push(state.delta_rad);
-        r.alpha.push(out.alpha[i]);
         r.lateral_error_m.push(motion.lateral_error_m);
         r.past_route_end.push(past_route_end(d, out.s_rear_m[i]));
         r.heading_error_rad.push(motion.heading_error_rad);

@@ -34,6 +34,34 @@ pub(crate) fn held_speed(v_mps: f64) -> f64 {
     }
 }
 
+/// The shortest simulator step (s) over which a braking leader is held at
+/// its mean speed ([`braking_mean_speed`]).
+pub(crate) const HOLD_BRAKING_MIN_STEP_S: f64 = 0.5;
+
+/// The speed to hold a leader at over a step of `dt_s`, given its speed
+/// `v_mps` and its acceleration over the last step: its mean speed over the
+/// step if it goes on braking so (stopping within the step, if it does),
+/// else its speed. Held at its speed, a leader braking into a queue gains on
+/// its follower all step, and at a 1 s step the follower, re-planning at
+/// every control step against where the leader is not, ran into it; at the
+/// mean speed it is never ahead of where it gets braking so (`v t` with
+/// `v = v0 + a dt / 2` against `v0 t + a t^2 / 2`, for `t` up to `dt`).
+/// The simulator's drivers get the same from the bridge. Only for steps of
+/// [`HOLD_BRAKING_MIN_STEP_S`] or more: below, the speed hold is off by at
+/// most `a dt^2 / 2` (2 cm at 0.1 s and 4.5 m/s^2), and the mean speed, fed
+/// from follower to follower down a platoon, cost the highway with every
+/// vehicle controlled 7 of its 151 arrivals in 300 s.
+pub(crate) fn braking_mean_speed(v_mps: f64, accel_mps2: f64, dt_s: f64) -> f64 {
+    if !(accel_mps2 < 0.0 && v_mps > 0.0 && dt_s >= HOLD_BRAKING_MIN_STEP_S) {
+        return v_mps;
+    }
+    if v_mps + accel_mps2 * dt_s <= 0.0 {
+        v_mps * v_mps / (-2.0 * accel_mps2) / dt_s
+    } else {
+        v_mps + 0.5 * accel_mps2 * dt_s
+    }
+}
+
 /// How far a vehicle got from `from` to `to` (m): the rear axle's
 /// displacement. The bicycle model never drives against its direction of
 /// travel, so this is its advance along it (a chord of the arc it drove,
@@ -230,7 +258,7 @@ pub(crate) fn stepped_finite(state: &VehicleState, s_rear_m: f64) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::substeps;
+    use super::{braking_mean_speed, substeps};
     use crate::testkit::*;
     use crate::*;
     use blendtrack::{Fleet, FleetInputs};
@@ -354,6 +382,44 @@ mod tests {
         step_behind(&mut g, b, (f64::NAN, f64::NAN), 8.0 * H);
         assert_ne!(g.state(b).unwrap(), want);
         assert_eq!(g.stats(b).unwrap().tracking.steps, 1);
+    }
+
+    #[test]
+    fn a_braking_leader_is_held_at_its_mean_speed_never_ahead_of_where_it_gets() {
+        // Closed forms: 10 m/s braking at 2 m/s^2 over 1 s averages 9 m/s;
+        // at 20 m/s^2 it stops after 0.5 s and 2.5 m, 2.5 m/s over the step.
+        assert_eq!(braking_mean_speed(10.0, -2.0, 1.0), 9.0);
+        assert_eq!(braking_mean_speed(10.0, -20.0, 1.0), 2.5);
+        // Not braking, standing, no step: its speed.
+        assert_eq!(braking_mean_speed(10.0, 1.5, 1.0), 10.0);
+        assert_eq!(braking_mean_speed(0.0, -3.0, 1.0), 0.0);
+        assert_eq!(braking_mean_speed(10.0, f64::NAN, 1.0), 10.0);
+        // Short steps: held at its speed.
+        assert_eq!(braking_mean_speed(10.0, -4.5, 0.1), 10.0);
+        // Held at it over the step, the leader is never ahead of where it
+        // gets going on braking so (the follower's side of safety).
+        for &(v, a, dt) in &[
+            (30.0, -4.5, 1.0),
+            (5.0, -9.0, 1.0),
+            (12.0, -1.0, 0.5),
+            (2.0, -4.0, 1.0),
+        ] {
+            let held = braking_mean_speed(v, a, dt);
+            for k in 0..=20 {
+                let t = dt * k as f64 / 20.0;
+                let stop = v / -a;
+                let real = if t < stop {
+                    v * t + 0.5 * a * t * t
+                } else {
+                    v * v / (-2.0 * a)
+                };
+                assert!(
+                    held * t <= real + 1e-9,
+                    "v {v} a {a} t {t}: {} > {real}",
+                    held * t
+                );
+            }
+        }
     }
 
     #[test]
