@@ -140,6 +140,28 @@ lateral_controller = "stanley"
     assert {r.run_id for r in again.runs} == set(ids)
 
 
+def test_alpha_auto_is_a_sweep_value_that_runs_the_automatic_alpha(tmp_path: Path) -> None:
+    """A sweep over alpha = [1.0, "auto"]: each run's metrics equal a direct
+    simulate() with ``ControllerConfig().with_alpha(value)`` under the sweep
+    defaults (an independent call of the same law), and auto differs from 1."""
+    import blendtrack
+
+    sweep = _sweep(tmp_path, 'kind = "sim"\nscenarios = ["test_track"]\n[fixed]\nduration_s = 60\n[grid]\nalpha = [1.0, "auto"]\n')
+    out = tmp_path / "out"
+    r = _cli("batch", str(sweep), "--workers", "1", "--quiet", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    got = {rec["params"]["alpha"]: rec["metrics"]["lateral_error_mean_abs_m"] for rec in _records(out).values()}
+    assert set(got) == {1.0, "auto"}
+    path = blendtrack.load_track("test_track")
+    for alpha in (1.0, "auto"):
+        _, m = blendtrack.simulate(path, blendtrack.ControllerConfig().with_alpha(alpha), duration_s=60, offset_m=4.0, seed=0)
+        assert got[alpha] == pytest.approx(m["lateral_error_mean_abs_m"], rel=1e-12), alpha
+    assert got["auto"] != pytest.approx(got[1.0], rel=1e-6)
+    bad = _sweep(tmp_path, 'kind = "sim"\nscenarios = ["test_track"]\n[grid]\nalpha = ["Auto"]\n', "bad.toml")
+    with pytest.raises(SweepError, match="alpha must be a number or one of 'auto', got 'Auto'"):
+        load_sweep(bad)
+
+
 # ------------------------------------------------- executors, same results
 @pytest.fixture(scope="module")
 def local_batch(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path, subprocess.CompletedProcess[str]]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import importlib.metadata
 import pickle
 import subprocess
@@ -142,3 +143,14 @@ def test_the_stub_lists_exactly_the_config_keys_the_core_has() -> None:
         node = next(n for n in stub.body if isinstance(n, ast.ClassDef) and n.name == cls)
         typed = {n.target.id for n in node.body if isinstance(n, ast.AnnAssign) and isinstance(n.target, ast.Name)}
         assert typed == set(instance.to_dict()), f"{cls}: stub {sorted(typed ^ set(instance.to_dict()))}"
+
+
+def test_with_alpha_sets_the_blend_factor_or_the_automatic_mode_and_refuses_the_rest() -> None:
+    auto_cfg = blendtrack.ControllerConfig(lat_blend_factor=0.2).with_alpha("auto")
+    assert (auto_cfg.alpha_mode, auto_cfg.lat_blend_factor) == ("auto", 0.2)
+    fixed = auto_cfg.with_alpha(0.7)
+    assert (fixed.alpha_mode, fixed.lat_blend_factor) == ("fixed", 0.7)
+    assert fixed.with_alpha(None) == fixed
+    for bad, words in (("Auto", "or \"auto\", got 'Auto'"), (True, "got True"), ([1], "got [1]"), (1.5, "lat_blend_factor")):
+        with pytest.raises(blendtrack.ConfigError, match=re.escape(words)):
+            fixed.with_alpha(bad)

@@ -143,12 +143,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
         overrides["direction"] = args.direction
     if args.speed is not None:
         overrides["preferred_speed"] = args.speed
-    if args.alpha == "auto":
-        overrides["alpha_mode"] = "auto"
-    elif args.alpha is not None:
-        overrides["lat_blend_factor"] = args.alpha
-        overrides["alpha_mode"] = "fixed"
-    config = config.replace(**overrides)
+    config = config.replace(**overrides).with_alpha(args.alpha)
     alpha: str | None = args.alpha_schedule
     if alpha is not None and config.alpha_mode == "auto":
         raise blendtrack.ConfigError("--alpha-schedule with a config whose alpha_mode is \"auto\" (drop one of them)")

@@ -127,21 +127,14 @@ def run(path: Path, config: ControllerConfig, vehicle: VehicleParams, sc: Scenar
     )
 
 
-# Two-sided 95 % quantiles of Student's t for 1..12 degrees of freedom.
-_T975 = (12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179)
-
-
 def ci95(values: Iterable[float]) -> tuple[float, float]:
-    """Mean and the half-width of its 95 % confidence interval (Student t; NaN half-width for fewer than 2 finite values)."""
-    v = np.array([x for x in values if math.isfinite(x)], dtype=float)
-    if len(v) == 0:
-        return math.nan, math.nan
-    if len(v) < 2:
-        return float(v.mean()), math.nan
-    df = len(v) - 1
-    t = _T975[df - 1] if df <= len(_T975) else 1.96 + 2.4 / df
-    half = float(t * v.std(ddof=1) / math.sqrt(len(v)))
-    return float(v.mean()), half
+    """Mean and the half-width of its 95 % confidence interval (Student t, from
+    :func:`blendtrack.reporting.mean_ci`; infinities left out; NaN half-width
+    for fewer than 2 finite values)."""
+    from blendtrack.reporting import mean_ci
+
+    m, lo, _ = mean_ci([x for x in values if math.isfinite(x)])
+    return m, m - lo
 
 
 def fmt_ci(values: Iterable[float], digits: int = 3) -> str:

@@ -70,9 +70,11 @@ def _split(params: dict[str, Any]) -> tuple[Any, Any, set[str]]:
     cfg_fields = set(config.to_dict())
     veh_fields = set(vehicle.to_dict())
     cfg = {k: v for k, v in params.items() if k in cfg_fields}
+    config = config.replace(**cfg).with_alpha(params.get("alpha"))
     if "alpha" in params:
-        cfg["lat_blend_factor"] = params["alpha"]
-    config = config.replace(**cfg)
+        cfg["alpha_mode"] = config.alpha_mode
+        if params["alpha"] != "auto":
+            cfg["lat_blend_factor"] = params["alpha"]
     vehicle = vehicle.replace(**{k: v for k, v in params.items() if k in veh_fields})
     return config, vehicle, keys | set(cfg)
 

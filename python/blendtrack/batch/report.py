@@ -99,6 +99,20 @@ def results_frame(manifest: dict[str, Any], records: dict[str, dict[str, Any]]) 
     return frame
 
 
+def _parquet_safe(frame: pd.DataFrame) -> pd.DataFrame:
+    """Parquet wants one type a column: a parameter swept over numbers and
+    words (alpha = [0.5, "auto"]) is written as text there ("0.5", "auto");
+    the frame itself (and results.csv) keeps the values as they are."""
+    mixed = [c for c in frame.columns if frame[c].dtype == object
+             and {type(v) for v in frame[c] if v is not None and v == v} - {str} and frame[c].map(lambda v: isinstance(v, str)).any()]
+    if not mixed:
+        return frame
+    out = frame.copy()
+    for c in mixed:
+        out[c] = out[c].map(lambda v: None if v is None or v != v else _fmt(v) if not isinstance(v, str) else v)
+    return out
+
+
 def _is_number(v: Any) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
@@ -264,7 +278,7 @@ def write_report(out: Path) -> pd.DataFrame:
     records = store.records()
     frame = results_frame(manifest, records)
     buf = io.BytesIO()
-    frame.to_parquet(buf, index=False)
+    _parquet_safe(frame).to_parquet(buf, index=False)
 
     params = list(dict.fromkeys(k for m in manifest.get("runs", []) for k in m.get("params", {})))
     metric_cols = _metric_order([c for c in frame.columns if c not in META_COLUMNS and c not in params])

@@ -83,6 +83,8 @@ class Param:
     #: The lower bound is exclusive.
     strict: bool = False
     choices: tuple[str, ...] = ()
+    #: Words a numeric parameter also takes (alpha: "auto").
+    words: tuple[str, ...] = ()
 
 
 def _config_params() -> dict[str, Param]:
@@ -98,7 +100,8 @@ def _config_params() -> dict[str, Param]:
 
 
 _OWN: tuple[Param, ...] = (
-    Param("alpha", float, KINDS, "blend factor (lat_blend_factor): 0 = rear axle, 1 = front axle", 0.0, 1.0),
+    Param("alpha", float, KINDS, "blend factor (lat_blend_factor): 0 = rear axle, 1 = front axle; \"auto\": alpha_mode auto", 0.0, 1.0,
+          words=("auto",)),
     Param("config", str, KINDS, "a TOML file with [controller] and [vehicle] tables; parameters override it"),
     # sim: the options of `blendtrack sim`
     Param("duration_s", float, ("sim",), "simulated time (s)", 0.0, None, True),
@@ -151,6 +154,10 @@ def _coerce(where: str, kind: str, name: str, value: Any) -> Any:
         close = difflib.get_close_matches(name, known, n=1)
         hint = f"did you mean {close[0]!r}? " if close else ""
         raise SweepError(f"{where}: unknown parameter {name!r} for kind {kind!r} ({hint}known: {', '.join(known)})")
+    if p.words and isinstance(value, str):
+        if value not in p.words:
+            raise SweepError(f"{where}: {name} must be a number or one of {', '.join(map(repr, p.words))}, got {value!r}")
+        return value
     if p.type is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise SweepError(f"{where}: {name} must be a number, got {_fmt(value)}")
@@ -328,9 +335,7 @@ def _check_run(where: str, kind: str, params: dict[str, Any], files: dict[str, s
             cfg, veh = _load_config(files["config"])
         else:
             cfg, veh = ControllerConfig(), VehicleParams()
-        cfg = cfg.replace(**{k: v for k, v in params.items() if k in cfg_fields})
-        if "alpha" in params:
-            cfg = cfg.replace(lat_blend_factor=params["alpha"])
+        cfg = cfg.replace(**{k: v for k, v in params.items() if k in cfg_fields}).with_alpha(params.get("alpha"))
         veh.replace(**{k: v for k, v in params.items() if k in veh_fields})
         if "noise" in params:
             from blendtrack.simulation import parse_noise

@@ -12,8 +12,8 @@ from typing import Any
 import numpy as np
 
 #: trace.csv's columns; the RouteFleet step outputs they come from are TRACE_KEYS.
-TRACE_COLUMNS = ("t_s", "id", "x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "lateral_error_m", "heading_error_rad", "s_m", "curvature_per_m", "accel_mps2", "virtual_obstacle_m", "edge", "lane_index")
-TRACE_KEYS = ("x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "lateral_error_m", "heading_error_rad", "s_rear_m", "curvature_per_m", "accel_mps2", "virtual_obstacle_m")
+TRACE_COLUMNS = ("t_s", "id", "x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "alpha", "lateral_error_m", "heading_error_rad", "s_m", "curvature_per_m", "accel_mps2", "virtual_obstacle_m", "edge", "lane_index")
+TRACE_KEYS = ("x_m", "y_m", "theta_rad", "v_mps", "delta_rad", "alpha", "lateral_error_m", "heading_error_rad", "s_rear_m", "curvature_per_m", "accel_mps2", "virtual_obstacle_m")
 
 
 @dataclass

@@ -213,3 +213,31 @@ def plot_run(result: RunResult, out: Path, comfort: float) -> list[Path]:
         ax.legend(loc="best", fontsize=8)
         files.append(save_figure(fig, out / "trajectory.png", 110))
     return files
+
+
+def plot_alpha(trace: Path, file: Path, most: int = 6) -> Path | None:
+    """alpha(t) of the ``most`` controlled vehicles with the longest traces,
+    when alpha changed during the run (``--alpha auto``); None otherwise (a
+    fixed alpha is one number, in summary.json's config)."""
+    import pandas as pd
+
+    frame = pd.read_csv(trace, usecols=["t_s", "id", "alpha"])
+    if frame.empty or frame["alpha"].nunique() < 2:
+        file.unlink(missing_ok=True)
+        return None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    longest = frame["id"].value_counts().index[:most]
+    fig, ax = plt.subplots(figsize=(8, 4))
+    for vid in longest:
+        sub = frame[frame["id"] == vid]
+        ax.plot(sub["t_s"], sub["alpha"], lw=1, label=str(vid))
+    ax.set_ylim(-0.05, 1.05)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("alpha (0 = rear axle, 1 = front axle)")
+    ax.set_title(f"alpha(t) of the {len(longest)} longest-driven controlled vehicles")
+    ax.legend(loc="best", fontsize=7, ncol=2)
+    return save_figure(fig, file, 110)

@@ -379,6 +379,34 @@ config_class!(
             PySet::new(py, keys_in_file(&file.display().to_string(), "controller")?)
         }
 
+        /// A copy that drives with this control point: a blend factor in
+        /// [0, 1] (`lat_blend_factor`, `alpha_mode = "fixed"`) or `"auto"`
+        /// (`alpha_mode = "auto"`); `None` leaves the config as it is. The one
+        /// place where `--alpha`, a vType's alpha and a sweep's `alpha` become
+        /// config keys.
+        fn with_alpha(&self, alpha: &Bound<'_, PyAny>) -> PyResult<Self> {
+            let bad = || {
+                let shown = alpha.repr().map(|r| r.to_string()).unwrap_or_default();
+                PyConfigError::new_err(format!("alpha must be a number in [0, 1] or \"auto\", got {shown}"))
+            };
+            let kwargs = PyDict::new(alpha.py());
+            if alpha.is_none() {
+                return Ok(self.clone());
+            } else if alpha.is_instance_of::<PyString>() {
+                if alpha.extract::<String>()? != "auto" {
+                    return Err(bad());
+                }
+                kwargs.set_item("alpha_mode", "auto")?;
+            } else if alpha.is_instance_of::<PyBool>() {
+                return Err(bad());
+            } else {
+                let a: f64 = alpha.extract().map_err(|_| bad())?;
+                kwargs.set_item("lat_blend_factor", a)?;
+                kwargs.set_item("alpha_mode", "fixed")?;
+            }
+            Self::with_kwargs(&self.to_core()?, Some(&kwargs))
+        }
+
         /// The keys as TOML (a `[controller]` table when `table` is true).
         #[pyo3(signature = (table = false))]
         fn to_toml(&self, table: bool) -> PyResult<String> {

@@ -727,6 +727,7 @@ impl RouteFleet {
             ("theta_rad", r.theta_rad),
             ("v_mps", r.v_mps),
             ("delta_rad", r.delta_rad),
+            ("alpha", r.alpha),
             ("accel_mps2", r.accel_mps2),
             ("lateral_error_m", r.lateral_error_m),
             ("heading_error_rad", r.heading_error_rad),

@@ -34,6 +34,8 @@ pub struct RouteOutputs {
     pub theta_rad: Vec<f64>,
     pub v_mps: Vec<f64>,
     pub delta_rad: Vec<f64>,
+    /// The blend factor the controller used (the last control step's).
+    pub alpha: Vec<f64>,
     pub accel_mps2: Vec<f64>,
     pub lateral_error_m: Vec<f64>,
     /// The body is past the route's end (the track ends there: the lateral
@@ -75,6 +77,7 @@ impl RouteOutputs {
             theta_rad: Vec::with_capacity(n),
             v_mps: Vec::with_capacity(n),
             delta_rad: Vec::with_capacity(n),
+            alpha: Vec::with_capacity(n),
             accel_mps2: Vec::with_capacity(n),
             lateral_error_m: Vec::with_capacity(n),
             past_route_end: Vec::with_capacity(n),
@@ -306,6 +309,7 @@ impl RouteFleet {
         r.theta_rad.push(th);
         r.v_mps.push(v);
         r.delta_rad.push(state.delta_rad);
+        r.alpha.push(out.alpha[i]);
         r.lateral_error_m.push(motion.lateral_error_m);
         r.past_route_end.push(past_route_end(d, out.s_rear_m[i]));
         r.heading_error_rad.push(motion.heading_error_rad);

@@ -114,26 +114,7 @@ impl SimOptions {
         if let Some(v) = self.fixed_speed_mps {
             check("fixed_speed_mps", v, v >= 0.0, "must be >= 0 (a magnitude)")?;
         }
-        let noise_ok = match self.noise {
-            NoiseModel::None => true,
-            NoiseModel::Uniform {
-                position_m,
-                heading_deg,
-            } => position_m >= 0.0 && heading_deg >= 0.0,
-            NoiseModel::RandomWalk {
-                position_step_m,
-                position_max_m,
-                heading_step_deg,
-                heading_max_deg,
-                interval_s,
-            } => {
-                position_step_m >= 0.0
-                    && position_max_m >= 0.0
-                    && heading_step_deg >= 0.0
-                    && heading_max_deg >= 0.0
-                    && interval_s > 0.0
-            }
-        };
+        let noise_ok = self.noise.is_valid();
         if !noise_ok {
             return Err(StateError::Parameter {
                 name: "noise",

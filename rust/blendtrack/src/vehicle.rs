@@ -199,6 +199,27 @@ pub enum NoiseModel {
     },
 }
 
+impl NoiseModel {
+    /// Every magnitude non-negative and the random walk's interval positive
+    /// (NaN fails, as any comparison with it does).
+    pub fn is_valid(&self) -> bool {
+        match *self {
+            NoiseModel::None => true,
+            NoiseModel::Uniform {
+                position_m: p,
+                heading_deg: h,
+            } => p >= 0.0 && h >= 0.0,
+            NoiseModel::RandomWalk {
+                position_step_m: ps,
+                position_max_m: pm,
+                heading_step_deg: hs,
+                heading_max_deg: hm,
+                interval_s: dt,
+            } => [ps, pm, hs, hm].iter().all(|&x| x >= 0.0) && dt > 0.0,
+        }
+    }
+}
+
 /// Stateful sensor: applies a [`NoiseModel`] with its own seeded generator.
 #[derive(Debug, Clone)]
 pub struct Sensor {
@@ -377,6 +398,32 @@ impl Vehicle {
 mod tests {
     use super::*;
     use std::f64::consts::PI;
+
+    #[test]
+    fn noise_models_with_a_negative_nan_or_zero_interval_are_invalid() {
+        let walk = |ps: f64, dt: f64| NoiseModel::RandomWalk {
+            position_step_m: ps,
+            position_max_m: 1.0,
+            heading_step_deg: 0.1,
+            heading_max_deg: 1.0,
+            interval_s: dt,
+        };
+        let uniform = |p: f64| NoiseModel::Uniform {
+            position_m: p,
+            heading_deg: 0.5,
+        };
+        assert!(NoiseModel::None.is_valid());
+        assert!(uniform(0.0).is_valid() && walk(0.0, 0.1).is_valid());
+        for bad in [
+            uniform(-0.1),
+            uniform(f64::NAN),
+            walk(-1.0, 0.1),
+            walk(0.1, 0.0),
+            walk(0.1, f64::NAN),
+        ] {
+            assert!(!bad.is_valid(), "{bad:?}");
+        }
+    }
 
     #[test]
     fn integrator_matches_closed_form_circle() {
