@@ -160,7 +160,7 @@ def plugin(scenario_name: str, end: float, scale: float, n: int) -> dict[str, An
 def _category(func: tuple[str, int, str]) -> str:
     """A cProfile entry's bucket: SUMO's step, a libsumo call, the Rust engine, or Python."""
     name = func[2]
-    if "simulationStep" in name or "simulation_step" in name:
+    if "simulation_step" in name:  # the SWIG function itself, not libsumo's Python wrapper around it
         return "SUMO step"
     if "libsumo" in name:
         call = name.split(".")[-1].rstrip(">").replace("vehicle_", "vehicle.")
