@@ -255,7 +255,8 @@ def main() -> None:
     cases = args.cases.split(",")
     unknown = [c for c in cases if c not in CASES]
     if unknown:
-        sys.exit(f"bench_sumo: unknown case(s) {', '.join(unknown)} (known: {', '.join(CASES)})")
+        print(f"bench_sumo: unknown case(s) {', '.join(unknown)} (known: {', '.join(CASES)})", file=sys.stderr)
+        sys.exit(2)
     if args.quick:
         args.end, args.counts, args.reps, args.profile = 60.0, "0,all", 1, True
     counts = [ALL if x == "all" else int(x) for x in args.counts.split(",")]
