@@ -1,68 +1,141 @@
 #!/usr/bin/env python3
-"""Benchmark of the SUMO plugin against plain SUMO (issue #4).
+"""Benchmark of the SUMO plugin against plain SUMO (issues #4 and #19).
 
-Runs one scenario with the same demand (SUMO's --scale multiplies it) as:
-plain SUMO through libsumo (every vehicle on SUMO's own models, nothing but
-simulationStep in the loop), then the plugin with 0, 10, 100 and 1000
-controlled vehicles (the first ones to depart), all with SUMO's same options
-and seed. Each case runs in a fresh process (libsumo runs one simulation per
-process reliably), right after a plain run of its own, over --reps
-repetitions (plain, 0, plain, 10, ..., plain, 0, ...): the machines this
-runs on are shared and their speed drifts by tens of per cent within
-minutes, so each ratio is of a case and the plain run just before it, and
-the medians are printed. Target:
-at 1000 controlled vehicles, at most 2x plain SUMO. A benchmark measures; it
-asserts nothing.
+Three cases, each at equal demand with and without the plugin:
 
-    .venv/bin/python scripts/bench_sumo.py [--scenario highway_onramp] [--scale 2] [--end 600] [--reps 3]
+- ``grid``: a generated 7 x 7 signalised grid (netgenerate: 150 m blocks,
+  two lanes per direction, guessed traffic lights; randomTrips: 1,200
+  vehicles over 300 s between fringe edges, up to ~770 in the network at
+  once), written once under ``out/bench/grid7``;
+- ``highway``: the shipped ``highway_onramp`` at demand x2 (SUMO's --scale);
+- ``bologna``: ``../shared/scenarios_real/bologna_acosta`` (real city
+  centre, signalised, buses).
+
+Each case runs plain SUMO through libsumo (nothing but ``simulationStep``
+in the loop; the same SUMO command line the plugin uses, seed 0), then the
+plugin with 0, 10, 100 and every vehicle controlled (the first ones to
+depart). Each run is a fresh process, right after a plain run of its own,
+over --reps repetitions: the machines this runs on are shared and their
+speed drifts by tens of per cent within minutes, so each ratio is of a run
+and the plain run just before it, and medians are printed.
+
+Columns: wall time and the process's CPU time, each with its ratio to the
+paired plain run's (median of the ratios; on a loaded machine CPU time is
+the steadier of the two, and it leaves out the plugin's check of the
+scenario in a child SUMO, which is skipped once cached); SUMO's step (its
+thread's CPU time inside ``simulationStep``) and its ratio; the rest (CPU
+time of Python, the Rust engine and the libsumo calls outside the step) per
+controlled vehicle-step; the mean and peak number of vehicles in the
+network. ``--profile`` then runs the
+every-vehicle case once more under cProfile and prints where its time goes
+(SUMO's step, each libsumo call kind, the Rust engine, Python's own time);
+cProfile slows the Python part, so read it as shares, not as wall time.
+
+Targets (issue 19): every vehicle controlled at most 2x plain (goal 1.3x),
+10 % controlled at most 1.2x. A benchmark measures; it asserts nothing.
+
+    .venv/bin/python scripts/bench_sumo.py [--cases grid,highway,bologna] [--reps 3] [--profile]
+    .venv/bin/python scripts/bench_sumo.py --quick    # 60 s of each, counts 0 and all, one repetition
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import multiprocessing
+import pstats
 import statistics
+import subprocess
+import sys
 import time
 from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
 from typing import Any
 
 from blendtrack.sumo import RunOptions, SumoRun, resolve_scenario
-from blendtrack.sumo.connection import sumo_binary
+from blendtrack.sumo.connection import SumoConnection
+
+ROOT = Path(__file__).resolve().parents[1]
+GRID_DIR = ROOT / "out" / "bench" / "grid7"
+#: name: (scenario, SUMO --scale, default simulated seconds)
+CASES: dict[str, tuple[str, float, float]] = {
+    "grid": (str(GRID_DIR), 1.0, 300.0),
+    "highway": ("highway_onramp", 2.0, 300.0),
+    "bologna": (str(ROOT.parent / "shared" / "scenarios_real" / "bologna_acosta"), 1.0, 300.0),
+}
+ALL = -1
+
+GRID_CFG = """<configuration>
+    <input><net-file value="grid7.net.xml"/><route-files value="grid7.rou.xml"/></input>
+    <time><begin value="0"/><end value="300"/><step-length value="0.1"/></time>
+    <processing><collision.check-junctions value="true"/><collision.action value="warn"/></processing>
+    <report><no-step-log value="true"/></report>
+</configuration>
+"""
+
+
+def build_grid() -> None:
+    """The 7 x 7 grid of issue 19, generated with SUMO's own tools (fixed seeds)."""
+    cfg = GRID_DIR / "grid7.sumocfg"
+    if cfg.is_file():
+        return
+    GRID_DIR.mkdir(parents=True, exist_ok=True)
+    bindir = Path(sys.executable).parent
+    import sumo
+
+    tools = Path(sumo.__file__).parent / "tools"
+    subprocess.run([str(bindir / "netgenerate"), "--grid", "--grid.number", "7", "--grid.length", "150",
+                    "--grid.attach-length", "100", "-L", "2", "--tls.guess", "true", "--no-turnarounds", "true",
+                    "--seed", "1", "-o", "grid7.net.xml"], cwd=GRID_DIR, check=True, capture_output=True)
+    # 0.25 s between departures over 300 s: 1,200 trips between fringe edges,
+    # at least 600 m long (four blocks).
+    subprocess.run([sys.executable, str(tools / "randomTrips.py"), "-n", "grid7.net.xml", "-o", "grid7.trips.xml",
+                    "-r", "grid7.rou.xml", "--seed", "1", "-b", "0", "-e", "300", "-p", "0.25", "--fringe-factor", "100",
+                    "--min-distance", "600", "--validate"], cwd=GRID_DIR, check=True, capture_output=True)
+    cfg.write_text(GRID_CFG)
+
+
+def _options(end: float, scale: float, n: int) -> RunOptions:
+    return RunOptions(controlled_fraction=1.0 if n != 0 else 0.0, max_controlled=None if n == ALL else n, end_s=end,
+                      sumo_args=("--scale", str(scale), "--no-warnings", "true"), progress=False)
 
 
 def plain(scenario_name: str, end: float, scale: float) -> dict[str, Any]:
     import libsumo
 
     scenario = resolve_scenario(scenario_name)
-    # Timed from SUMO's start, as the plugin's run is (which also checks the
-    # scenario in a child SUMO and reads the network for the lane geometry).
-    t0 = time.perf_counter()
-    # The options the plugin gives SUMO (SumoConnection.command): the same seed
-    # (another one is other traffic), no logs.
-    libsumo.start([sumo_binary(), "-c", str(scenario.sumocfg), "--seed", "0", "--end", str(end), "--scale", str(scale),
-                   "--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"])
+    # SUMO's command line as the plugin builds it (outputs under a temporary
+    # folder, same seed and options).
+    conn = SumoConnection(scenario, _options(end, scale, 0), None)
+    cmd = conn.command()
+    t0, c0 = time.perf_counter(), time.process_time()
+    libsumo.start(cmd)
     n = 0
+    stepping = 0.0
+    counts: list[int] = []
     while libsumo.simulation.getTime() < end - 1e-9 and libsumo.simulation.getMinExpectedNumber() > 0:
+        t = time.thread_time()
         libsumo.simulationStep()
+        stepping += time.thread_time() - t
+        counts.append(len(libsumo.vehicle.getIDList()))
         n += 1
     libsumo.close()
-    return {"wall": time.perf_counter() - t0, "steps": n}
+    return {"wall": time.perf_counter() - t0, "cpu": time.process_time() - c0, "sumo_step": stepping, "steps": n,
+            "counts": counts}
 
 
-def plugin(scenario_name: str, end: float, scale: float, n: int) -> dict[str, Any]:
-    opts = RunOptions(controlled_fraction=1.0 if n > 0 else 0.0, max_controlled=n, end_s=end,
-                      sumo_args=("--scale", str(scale), "--no-warnings", "true"), progress=False)
-    run = SumoRun(resolve_scenario(scenario_name), opts, None)
-    stepping = 0.0
+def _timed_run(scenario_name: str, end: float, scale: float, n: int) -> tuple[SumoRun, dict[str, Any]]:
+    run = SumoRun(resolve_scenario(scenario_name), _options(end, scale, n), None)
+    acc = {"sumo_step": 0.0}
+    counts: list[int] = []
     sumo_step: Any = None
 
     def timed_step() -> None:
-        nonlocal stepping
-        t = time.perf_counter()
+        t = time.thread_time()
         sumo_step()
-        stepping += time.perf_counter() - t
+        acc["sumo_step"] += time.thread_time() - t
 
-    start = run.start
+    start = run.conn.start
 
     def start_and_time() -> None:
         nonlocal sumo_step
@@ -70,62 +143,127 @@ def plugin(scenario_name: str, end: float, scale: float, n: int) -> dict[str, An
         sumo_step = run.sumo.simulationStep
         run.sumo.simulationStep = timed_step
 
-    run.start = start_and_time  # type: ignore[method-assign]
-    t0 = time.perf_counter()
+    run.conn.start = start_and_time  # type: ignore[method-assign]
+    run.step_hooks.append(lambda r, t: counts.append(len(r.sumo.vehicle.getIDList())))
+    return run, {"acc": acc, "counts": counts}
+
+
+def plugin(scenario_name: str, end: float, scale: float, n: int) -> dict[str, Any]:
+    run, extra = _timed_run(scenario_name, end, scale, n)
+    t0, c0 = time.perf_counter(), time.process_time()
     res = run.run()
-    wall = time.perf_counter() - t0
-    return {"wall": wall, "sumo_step": stepping, "veh_steps": sum(r.steps for r in res.records), **res.summary}
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    return {"wall": wall, "cpu": cpu, "sumo_step": extra["acc"]["sumo_step"], "counts": extra["counts"],
+            "veh_steps": sum(r.steps for r in res.records), **res.summary}
 
 
-def in_fresh_process(fn: Any, *args: Any) -> dict[str, Any]:
-    """libsumo runs one simulation per process reliably: every case gets its
+def _category(func: tuple[str, int, str]) -> str:
+    """A cProfile entry's bucket: SUMO's step, a libsumo call, the Rust engine, or Python."""
+    name = func[2]
+    if "simulation_step" in name:  # the SWIG function itself, not libsumo's Python wrapper around it
+        return "SUMO step"
+    if "libsumo" in name:
+        call = name.split(".")[-1].rstrip(">").replace("vehicle_", "vehicle.")
+        return f"libsumo {call}"
+    if "RouteFleet" in name or "blendtrack._native" in name or "builtins.RouteFleet" in name:
+        return "Rust " + name.split("'")[1] if "'" in name else "Rust"
+    return "Python"
+
+
+def profiled(scenario_name: str, end: float, scale: float, n: int) -> dict[str, Any]:
+    run, _ = _timed_run(scenario_name, end, scale, n)
+    prof = cProfile.Profile()
+    prof.enable()
+    run.run()
+    prof.disable()
+    stats = pstats.Stats(prof).stats  # type: ignore[attr-defined]
+    buckets: dict[str, list[float]] = {}
+    for func, (_cc, nc, tt, _ct, _callers) in stats.items():
+        b = buckets.setdefault(_category(func), [0.0, 0.0])
+        b[0] += tt
+        b[1] += nc
+    return {k: (v[0], int(v[1])) for k, v in buckets.items()}
+
+
+def in_fresh_process(fn: Any, *args: Any) -> Any:
+    """libsumo runs one simulation per process reliably: every run gets its
     own (spawned) process; the time is measured inside it, from SUMO's start
     (Python's start and imports excluded)."""
     with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
         return pool.submit(fn, *args).result()
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--scenario", default="highway_onramp")
-    ap.add_argument("--scale", type=float, default=2.0, help="demand multiplier (SUMO --scale)")
-    ap.add_argument("--end", type=float, default=600.0)
-    ap.add_argument("--counts", default="0,10,100,1000")
-    ap.add_argument("--reps", type=int, default=3, help="interleaved repetitions (medians are printed)")
-    args = ap.parse_args()
-    sc = resolve_scenario(args.scenario)
-    counts = [int(x) for x in args.counts.split(",")]
-    plains: list[float] = []
+def bench_case(case: str, end: float, reps: int, counts: list[int], profile: bool) -> None:
+    scenario, scale, _ = CASES[case]
+    plains: list[dict[str, Any]] = []
     runs: dict[int, list[dict[str, Any]]] = {n: [] for n in counts}
-    ratios: dict[int, list[float]] = {n: [] for n in counts}
-    for rep in range(args.reps):
-        print(f"rep {rep + 1}/{args.reps}:", end="", flush=True)
+    ratios: dict[str, dict[int, list[float]]] = {k: {n: [] for n in counts} for k in ("wall", "cpu", "sumo_step")}
+    for rep in range(reps):
+        print(f"{case} rep {rep + 1}/{reps}:", end="", flush=True)
         for n in counts:
-            # A plain run right before each case: the ratio is of two runs a
-            # few seconds apart.
-            p = in_fresh_process(plain, sc.name, args.end, args.scale)
-            plains.append(p["wall"])
-            r = in_fresh_process(plugin, sc.name, args.end, args.scale, n)
+            p = in_fresh_process(plain, scenario, end, scale)
+            plains.append(p)
+            r = in_fresh_process(plugin, scenario, end, scale, n)
             runs[n].append(r)
-            ratios[n].append(r["wall"] / p["wall"])
-            print(f" plain {p['wall']:.2f} s, {n}: {r['wall']:.2f} s;", end="", flush=True)
+            for k, rk in ratios.items():
+                rk[n].append(r[k] / p[k])
+            print(f" plain {p['wall']:.2f} s, {'all' if n == ALL else n}: {r['wall']:.2f} s;", end="", flush=True)
         print()
-    base = statistics.median(plains)
-    print(f"\nscenario {sc.name}, demand x{args.scale:g}, {args.end:g} s simulated, {p['steps']} steps, "
-          f"medians of {args.reps} repetitions; x plain: the median of each run over the plain run just before it; "
-          f"ratio range {', '.join(f'{n}: {min(ratios[n]):.2f}-{max(ratios[n]):.2f}' for n in counts)}")
-    print(f"{'controlled':>10} {'wall (s)':>9} {'x plain':>8} {'SUMO step (s)':>14} {'rest (s)':>9} {'us / veh / step':>16}")
-    print(f"{'plain SUMO':>10} {base:9.2f} {1.0:8.2f} {base:14.2f} {'':>9} {'':>16}")
+
+    def med(rs: list[dict[str, Any]], key: str) -> float:
+        return statistics.median(r[key] for r in rs)
+
+    pc = plains[0]["counts"]
+    print(f"\n{case}: {scenario} demand x{scale:g}, {end:g} s simulated, {plains[0]['steps']} steps, medians of {reps} "
+          f"repetition(s); x: median over the repetitions of each run over the plain run just before it; cpu: the "
+          f"process's CPU time, step: SUMO's step (its thread's CPU time), rest: cpu - step")
+    print(f"{'controlled':>10} {'wall s':>7} {'x wall':>6} {'cpu s':>7} {'x cpu':>6} {'x range':>11} {'step s':>7} "
+          f"{'x step':>6} {'rest s':>7} {'us/veh-step':>11} {'veh mean/peak':>13}")
+    print(f"{'plain':>10} {med(plains, 'wall'):7.2f} {1.0:6.2f} {med(plains, 'cpu'):7.2f} {1.0:6.2f} {'':>11} "
+          f"{med(plains, 'sumo_step'):7.2f} {1.0:6.2f} {'':>7} {'':>11} {statistics.mean(pc):6.0f}/{max(pc):<6d}")
     for n in counts:
         rs = runs[n]
-        wall = statistics.median(r["wall"] for r in rs)
-        step = statistics.median(r["sumo_step"] for r in rs)
-        rest = statistics.median(r["wall"] - r["sumo_step"] for r in rs)
+        rest = statistics.median(r["cpu"] - r["sumo_step"] for r in rs)
         vs = rs[0]["veh_steps"]
         per = rest / vs * 1e6 if vs else float("nan")
-        print(f"{rs[0]['controlled_vehicles']:>10} {wall:9.2f} {statistics.median(ratios[n]):8.2f} {step:14.2f} {rest:9.2f} {per:16.2f}"
-              f"   (background {rs[0]['background_vehicles']}, collisions {rs[0]['collisions']},"
-              f" teleports {rs[0]['teleports']}, backend {rs[0]['backend']})", flush=True)
+        c = rs[0]["counts"]
+        rc = ratios["cpu"][n]
+        print(f"{rs[0]['controlled_vehicles']:>10} {med(rs, 'wall'):7.2f} {statistics.median(ratios['wall'][n]):6.2f} "
+              f"{med(rs, 'cpu'):7.2f} {statistics.median(rc):6.2f} {f'{min(rc):.2f}-{max(rc):.2f}':>11} "
+              f"{med(rs, 'sumo_step'):7.2f} {statistics.median(ratios['sumo_step'][n]):6.2f} {rest:7.2f} {per:11.2f} "
+              f"{statistics.mean(c):6.0f}/{max(c):<6d}  (background {rs[0]['background_vehicles']}, collisions "
+              f"{rs[0]['collisions']}, teleports {rs[0]['teleports']}, moves speed/lane/xy {rs[0]['moves_speed_only']}/"
+              f"{rs[0]['moves_lane_position']}/{rs[0]['moves_xy']})", flush=True)
+    if profile:
+        prof = in_fresh_process(profiled, scenario, end, scale, ALL)
+        total = sum(t for t, _ in prof.values())
+        print(f"cProfile, every vehicle controlled (total {total:.2f} s under the profiler):")
+        for k, (t, nc) in sorted(prof.items(), key=lambda kv: -kv[1][0])[:14]:
+            print(f"  {k:<44} {t:7.2f} s {100 * t / total:5.1f} %  {nc:>10d} calls")
+    print(flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--cases", default="grid,highway,bologna", help=f"comma-separated, of {', '.join(CASES)}")
+    ap.add_argument("--end", type=float, default=None, help="simulated seconds (default: each case's own, 300 s)")
+    ap.add_argument("--counts", default="0,10,100,all", help="controlled vehicles per run ('all': every vehicle)")
+    ap.add_argument("--reps", type=int, default=3, help="interleaved repetitions (medians are printed)")
+    ap.add_argument("--profile", action="store_true", help="also profile the every-vehicle run of each case")
+    ap.add_argument("--quick", action="store_true", help="60 s, counts 0 and all, one repetition, with the profile")
+    args = ap.parse_args()
+    cases = args.cases.split(",")
+    unknown = [c for c in cases if c not in CASES]
+    if unknown:
+        print(f"bench_sumo: unknown case(s) {', '.join(unknown)} (known: {', '.join(CASES)})", file=sys.stderr)
+        sys.exit(2)
+    if args.quick:
+        args.end, args.counts, args.reps, args.profile = 60.0, "0,all", 1, True
+    counts = [ALL if x == "all" else int(x) for x in args.counts.split(",")]
+    if "grid" in cases:
+        build_grid()
+    for case in cases:
+        bench_case(case, args.end if args.end is not None else CASES[case][2], args.reps, counts, args.profile)
 
 
 if __name__ == "__main__":
