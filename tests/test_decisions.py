@@ -129,6 +129,13 @@ def test_tactical_gap_is_the_headway_and_braking_distance_in_closed_form() -> No
     assert lc.tactical_gap(6.0, -30.0, 1.0) == pytest.approx(5.0 + 6.0 + 18.0)
 
 
+def test_tactical_gap_follows_its_constants(monkeypatch: pytest.MonkeyPatch) -> None:
+    """At 2 m/s^2 of braking and 1.5 s of headway: 5 + 1.5 * 20 + 300 / 4."""
+    monkeypatch.setattr(lc, "TACTICAL_DECEL_MPS2", 2.0)
+    monkeypatch.setattr(lc, "TACTICAL_HEADWAY_S", 1.5)
+    assert lc.tactical_gap(20.0, 10.0, 1.0) == pytest.approx(5.0 + 30.0 + 75.0)
+
+
 def test_change_length_is_two_seconds_of_travel_within_its_bounds() -> None:
     assert lc.change_length(12.0, math.inf) == pytest.approx(24.0)
     assert lc.change_length(-12.0, math.inf) == pytest.approx(24.0)
@@ -177,6 +184,9 @@ def test_target_lane_clear_at_its_boundary(direction: int, side: int) -> None:
     for gap_f, gap_l, clear in [(13.0 + EPS, 11.0 + EPS, True), (13.0 - 1e-3, 11.0 + EPS, False), (13.0 + EPS, 11.0 - 1e-3, False)]:
         v.neighbours = {("me", side): [("f", gap_f)], ("me", side | 2): [("l", gap_l)]}
         assert lcs.target_lane_clear("me", direction, 10.0, 2.0) is clear, (gap_f, gap_l)
+    # Exactly at the needed gap (13 m and 11 m, exact in binary) is room enough.
+    v.neighbours = {("me", side): [("f", 13.0)], ("me", side | 2): [("l", 11.0)]}
+    assert lcs.target_lane_clear("me", direction, 10.0, 2.0)
     # The other side's vehicles are not looked at.
     v.neighbours = {("me", 1 - side): [("f", 0.0)], ("me", (1 - side) | 2): [("l", 0.0)]}
     assert lcs.target_lane_clear("me", direction, 10.0, 2.0)
@@ -304,7 +314,7 @@ def test_ask_courtesy_picks_the_nearest_follower_that_can_brake_gently() -> None
     conn.lanes["t_0"] = ["near"]
     lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
     assert lcs._courtesy == {}
-    v.cars["near"]["pos"] = 95.0 - 150.0 + 1.0
+    v.cars["near"]["pos"] = 95.0 - 150.0  # exactly at the range: asked
     lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
     assert "near" in lcs._courtesy
     lcs._courtesy = {}
@@ -342,9 +352,10 @@ def test_wait_for_gap_lines_up_behind_the_tighter_neighbour() -> None:
     v.neighbours = {("me", 3): [("lead", 12.0)], ("me", 1): [("back", 7.0)]}
     lcs.wait_for_gap("me", -1, "t_0", 100.0, 10.0)
     assert lcs._merge_leads == {"me": ("lead", 12.0)}
-    v.neighbours = {("me", 3): [("lead", 12.0)], ("me", 1): [("side", -2.0), ("back", 7.0)]}
-    lcs.wait_for_gap("me", -1, "t_0", 100.0, 10.0)
-    assert lcs._merge_leads == {"me": ("side", 0.0)}
+    for alongside in (-2.0, -0.5):
+        v.neighbours = {("me", 3): [("lead", 12.0)], ("me", 1): [("side", alongside), ("back", 7.0)]}
+        lcs.wait_for_gap("me", -1, "t_0", 100.0, 10.0)
+        assert lcs._merge_leads == {"me": ("side", 0.0)}, alongside
     # To the left: bits 2 and 0; a leader alongside (negative gap) is at 0.
     lcs._merge_leads = {}
     v.neighbours = {("me", 2): [("lead", -1.0)]}
@@ -370,8 +381,9 @@ def test_internal_junction_busy_with_a_foe_inside_or_near() -> None:
     conn.lanes[":j_foe"] = ["me"]
     j = junctions(conn, [(":j_foe", None, 50.0, "", -1)])
     assert not j.internal_junction_busy("me", ":j_w"), "the vehicle itself is no foe"
-    conn.lanes[":j_foe"] = ["me", "x"]
-    assert j.internal_junction_busy("me", ":j_w")
+    for foe in ("x", "a"):  # any other vehicle, whatever its id
+        conn.lanes[":j_foe"] = ["me", foe]
+        assert j.internal_junction_busy("me", ":j_w"), foe
     # On the incoming lane, 50 m long: busy within 4 s (at 10 m/s: 40 m) or 5 m of the line.
     conn.lanes = {"in_0": ["o"]}
     j = junctions(conn, [(":j_foe", "in_0", 50.0, "", -1)])
@@ -521,6 +533,9 @@ def test_junction_blocked_by_a_body_within_the_half_width() -> None:
     assert j.junction_blocked("me", "in_0") and j.counts["inside_junction_waits"] == 1
     v.cars["o"]["xy"] = (10.0, 7.3 + 1e-3)
     assert not j.junction_blocked("me", "in_0") and j.counts["inside_junction_waits"] == 1
+    # Exactly 2.3 m away (7.3 - 5 and 1 + 0.3 + 1 round to the same double): not within.
+    v.cars["o"]["xy"] = (10.0, 7.3)
+    assert not j.junction_blocked("me", "in_0")
     network.junction_lanes = lambda via: (path, [])
     v.cars["o"]["xy"] = (10.0, 0.0)
     assert not j.junction_blocked("me", "in_0")
