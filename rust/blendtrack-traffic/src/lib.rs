@@ -519,6 +519,30 @@ mod tests {
     use blendtrack::FleetError;
 
     #[test]
+    fn settings_are_the_fleets_own() {
+        let (f, _) = fleet_with(road(None, true), one_control_step());
+        assert_eq!(f.settings().control_dt_s, DT);
+        assert_ne!(TrafficSettings::default().control_dt_s, DT);
+    }
+
+    #[test]
+    fn the_front_is_reach_ahead_along_the_heading() {
+        // Rear axle at x = 50 on the straight road, heading 0.5 rad off it:
+        // the front point, 3.5 m ahead along the heading, projects to
+        // x = 50 + 3.5 cos 0.5.
+        let (mut f, t) = fleet_on(road(None, true));
+        let mut st = at(50.0, 0.0);
+        st.theta_rad = 0.5;
+        let a = f.add_vehicle(t, None, None, body(), st).unwrap() as i64;
+        let want = 50.0 + 3.5 * 0.5f64.cos();
+        assert!(
+            (f.s_front(a).unwrap() - want).abs() < 1e-9,
+            "{}",
+            f.s_front(a).unwrap()
+        );
+    }
+
+    #[test]
     fn retrack_keeps_state_and_statistics() {
         let (mut f, t) = fleet_on(road(None, true));
         let t2 = f
