@@ -28,13 +28,18 @@ def rust_area(out: Path, area: str) -> dict | None:
     if not d.is_dir():
         return None
     caught, missed, timeout, unviable = (lines(d / f"{k}.txt") for k in ("caught", "missed", "timeout", "unviable"))
-    killed, later = len(caught) + len(timeout), 0
+    killed, later, extra = len(caught) + len(timeout), 0, []
     r = out / area / "retest" / "mutants.out"
     if (r / "outcomes.json").is_file():
-        later = len(lines(r / "caught.txt")) + len(lines(r / "timeout.txt"))
-        timeout += lines(r / "timeout.txt")
-        missed = lines(r / "missed.txt")
-    return {"killed": killed + later, "later": later, "missed": missed, "unviable": len(unviable), "timeout": len(timeout)}
+        # Only the first run's survivors count (cargo-mutants' --re can
+        # match a few more mutants: listed apart, outside the sample).
+        first = set(missed)
+        again = lines(r / "caught.txt") + lines(r / "timeout.txt")
+        later = sum(m in first for m in again)
+        timeout += [m for m in lines(r / "timeout.txt") if m in first]
+        missed = [m for m in lines(r / "missed.txt") if m in first]
+        extra = [f"{m} (caught)" for m in again if m not in first] + [f"{m} (missed)" for m in lines(r / "missed.txt") if m not in first]
+    return {"killed": killed + later, "later": later, "missed": missed, "unviable": len(unviable), "timeout": len(timeout), "extra": extra}
 
 
 def rate(killed: int, missed: int) -> str:
@@ -45,7 +50,7 @@ def rate(killed: int, missed: int) -> str:
 def main() -> None:
     out = Path(sys.argv[1])
     meta = json.loads((out / "meta.json").read_text()) if (out / "meta.json").is_file() else {}
-    rows, survivors = [], []
+    rows, survivors, extras = [], [], []
     for area, (what, target) in RUST_AREAS.items():
         r = rust_area(out, area)
         if r is None:
@@ -53,6 +58,7 @@ def main() -> None:
         k, m = r["killed"], len(r["missed"])
         rows.append(f"| {what} | cargo-mutants | {k + m} | {k} ({r['later']} by tests added after the first run, {r['timeout']} by time-out) | {m} | {r['unviable']} | {rate(k, m)} | {target:.0%} |")
         survivors += [f"- `{s}`" for s in r["missed"]]
+        extras += [f"- `{s}`" for s in r["extra"]]
     py = out / "py" / "python.json"
     if py.is_file():
         rep = json.loads(py.read_text())
@@ -75,6 +81,7 @@ def main() -> None:
         "",
         *(survivors or ["none"]),
         "",
+        *(["## Outside the sample (tested by the survivors' re-run filter)", "", *extras, ""] if extras else []),
     ]
     (out / "report.md").write_text("\n".join(text))
     print("\n".join(text[:6 + len(rows)]))
