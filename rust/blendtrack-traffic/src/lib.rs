@@ -543,6 +543,28 @@ mod tests {
     }
 
     #[test]
+    fn the_lane_speed_limit_caps_a_faster_preferred_speed() {
+        // The road's lanes allow 20 m/s; the driver would go 30. Starting
+        // at 19 m/s, 40 s later it drives at the limit, not above it.
+        let mut f = RouteFleet::new(one_control_step()).unwrap();
+        let cfg = ControllerConfig {
+            preferred_speed: 30.0,
+            ..Default::default()
+        };
+        let (path, route) = road(None, true);
+        let t = f.add_route(path, cfg, route).unwrap() as i64;
+        let a = f
+            .add_vehicle(t, None, None, body(), at(10.0, 19.0))
+            .unwrap() as i64;
+        let mut top: f64 = 0.0;
+        for _ in 0..400 {
+            step(&mut f, &[a], false);
+            top = top.max(f.state(a).unwrap().v_mps);
+        }
+        assert!(top <= 20.0 + 1e-9 && top > 19.0, "{top}");
+    }
+
+    #[test]
     fn retrack_keeps_state_and_statistics() {
         let (mut f, t) = fleet_on(road(None, true));
         let t2 = f
