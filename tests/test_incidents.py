@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import os
 import re
 import subprocess
 import sys
@@ -15,7 +16,7 @@ import pytest
 
 from blendtrack.sumo.outputs import read_collisions
 
-REAL = Path(__file__).resolve().parents[2] / "shared" / "scenarios_real"
+REAL = Path(os.environ.get("BLENDTRACK_SHARED_DIR") or Path(__file__).resolve().parents[2] / "shared") / "scenarios_real"
 
 COLLISIONS = """<?xml version="1.0" encoding="UTF-8"?>
 <collisions>

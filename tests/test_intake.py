@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import gzip
 import hashlib
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -18,7 +19,7 @@ from blendtrack.sumo.connection import sumo_binary
 
 REPO = Path(__file__).resolve().parents[1]
 RING = REPO / "sumo_scenarios" / "ring_single_lane"
-REAL = REPO.parent / "shared" / "scenarios_real"
+REAL = Path(os.environ.get("BLENDTRACK_SHARED_DIR") or REPO.parent / "shared") / "scenarios_real"
 
 needs_real = pytest.mark.skipif(not REAL.is_dir(), reason="../shared/scenarios_real is not beside the repo")
 

@@ -584,6 +584,52 @@ mod tests {
     use blendtrack::FleetError;
 
     #[test]
+    fn settings_are_the_fleets_own() {
+        let (f, _) = fleet_with(road(None, true), one_control_step());
+        assert_eq!(f.settings().control_dt_s, DT);
+        assert_ne!(TrafficSettings::default().control_dt_s, DT);
+    }
+
+    #[test]
+    fn the_front_is_reach_ahead_along_the_heading() {
+        // Rear axle at x = 50 on the straight road, heading 0.5 rad off it:
+        // the front point, 3.5 m ahead along the heading, projects to
+        // x = 50 + 3.5 cos 0.5.
+        let (mut f, t) = fleet_on(road(None, true));
+        let mut st = at(50.0, 0.0);
+        st.theta_rad = 0.5;
+        let a = f.add_vehicle(t, None, None, body(), st).unwrap() as i64;
+        let want = 50.0 + 3.5 * 0.5f64.cos();
+        assert!(
+            (f.s_front(a).unwrap() - want).abs() < 1e-9,
+            "{}",
+            f.s_front(a).unwrap()
+        );
+    }
+
+    #[test]
+    fn the_lane_speed_limit_caps_a_faster_preferred_speed() {
+        // The road's lanes allow 20 m/s; the driver would go 30. Starting
+        // at 19 m/s, 40 s later it drives at the limit, not above it.
+        let mut f = RouteFleet::new(one_control_step()).unwrap();
+        let cfg = ControllerConfig {
+            preferred_speed: 30.0,
+            ..Default::default()
+        };
+        let (path, route) = road(None, true);
+        let t = f.add_route(path, cfg, route).unwrap() as i64;
+        let a = f
+            .add_vehicle(t, None, None, body(), at(10.0, 19.0))
+            .unwrap() as i64;
+        let mut top: f64 = 0.0;
+        for _ in 0..400 {
+            step(&mut f, &[a], false);
+            top = top.max(f.state(a).unwrap().v_mps);
+        }
+        assert!(top <= 20.0 + 1e-9 && top > 19.0, "{top}");
+    }
+
+    #[test]
     fn retrack_keeps_state_and_statistics() {
         let (mut f, t) = fleet_on(road(None, true));
         let t2 = f

@@ -466,6 +466,36 @@ mod tests {
     }
 
     #[test]
+    fn curvature_lookahead_is_twice_the_wheelbase_or_the_speed_term() {
+        // L = max(2 E, 2 s * |v|) with the default gain of 2 s, E = 2.5 m.
+        let cfg = ControllerConfig::default();
+        assert_eq!(cfg.curvature_lookahead_gain_s, 2.0);
+        let g = LateralGains::new(&cfg, 2.5);
+        assert_eq!(g.curvature_lookahead(0.0), 5.0);
+        assert_eq!(g.curvature_lookahead(1.0), 5.0);
+        assert_eq!(g.curvature_lookahead(10.0), 20.0);
+    }
+
+    #[test]
+    fn pure_pursuit_aims_at_the_point_l_d_ahead_of_the_foot() {
+        // Straight path along +x, rear axle 1 m to its left heading +x at
+        // 10 m/s: l_d = 0.5 s * 10 + 2 = 7 m, the target 7 m ahead on the
+        // path, at (7, -1) in the vehicle frame: atan(2 E (-1) / (49 + 1)).
+        let cfg = ControllerConfig {
+            pure_pursuit_gain_s: 0.5,
+            pure_pursuit_min_lookahead_m: 2.0,
+            ..Default::default()
+        };
+        let g = LateralGains::new(&cfg, 2.6);
+        let path = Path::straight(200.0, 1.0).unwrap();
+        let rear = (50.0, 1.0);
+        let pr = path.project(&nalgebra::Point2::new(rear.0, rear.1));
+        let d = pure_pursuit_command(&path, rear, &pr, 0.0, 10.0, Direction::Forward, &g);
+        let expected = (2.0 * 2.6 * -1.0 / 50.0f64).atan();
+        assert!((d - expected).abs() < 1e-12, "{d} vs {expected}");
+    }
+
+    #[test]
     fn rear_law_on_circle_with_zero_errors_gives_ackermann() {
         let cfg = stiff_config();
         let g = LateralGains::new(&cfg, 2.6);

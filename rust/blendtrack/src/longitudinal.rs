@@ -636,6 +636,23 @@ mod tests {
     use super::*;
 
     #[test]
+    fn simplify_keeps_vertices_that_fold_back_beyond_the_chord() {
+        // All on the x axis: (12, 0) lies on the line of the chord from
+        // (0, 0) to (10, 0), 0 m from it, but beyond its end; (5, 0) is on
+        // the chord itself and goes.
+        let pts: Vec<Point2<f64>> = [[0.0, 0.0], [5.0, 0.0], [12.0, 0.0], [10.0, 0.0]]
+            .iter()
+            .map(|p| Point2::new(p[0], p[1]))
+            .collect();
+        assert_eq!(simplify(&pts, 0.01), vec![0, 2, 3]);
+        let back: Vec<Point2<f64>> = [[0.0, 0.0], [-3.0, 0.0], [5.0, 0.0], [10.0, 0.0]]
+            .iter()
+            .map(|p| Point2::new(p[0], p[1]))
+            .collect();
+        assert_eq!(simplify(&back, 0.01), vec![0, 1, 3]);
+    }
+
+    #[test]
     fn stopping_law_identity_on_a_grid() {
         // v tau + a tau^2/2 + (v + a tau)^2 / (-2 b_f) = s - s0 + v_l^2 / (-2 b_l)
         let mut checked = 0;

@@ -6,11 +6,15 @@ use blendtrack::*;
 use nalgebra::Point2;
 use std::path::PathBuf;
 
-/// A race track of ../shared/tracks, or `None` (with a message saying the
-/// test is skipped) when that folder is not beside the repository. A track
-/// that is there but does not load is a failure, not a skip.
+/// A race track of ../shared/tracks (or of `$BLENDTRACK_SHARED_DIR/tracks`),
+/// or `None` (with a message saying the test is skipped) when that folder
+/// is not there. A track that is there but does not load is a failure, not
+/// a skip.
 fn shared_track(name: &str) -> Option<Path> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/tracks");
+    let shared = std::env::var_os("BLENDTRACK_SHARED_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared"));
+    let dir = shared.join("tracks");
     if !dir.is_dir() {
         eprintln!(
             "skipped: {} is missing (keep ../shared beside the repo)",

@@ -1,0 +1,541 @@
+"""The SUMO bridge's decisions (lane changes, leaders, junctions, lights) on a
+stand-in for SUMO: each answer is checked against the rule's closed form,
+worked out by hand here, on both sides of its boundary. No SUMO process:
+these run in a second and are the tests ``scripts/mutants`` runs per mutant
+of ``lanechange.py`` and ``junctions.py`` (docs/testing.md)."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+from typing import Any
+
+import pytest
+import traci.constants as tc
+
+from blendtrack.sumo import junctions as jn
+from blendtrack.sumo import lanechange as lc
+from blendtrack.sumo.junctions import Junctions
+from blendtrack.sumo.lanechange import LaneChanges
+
+EPS = 1e-6
+
+
+class FakeVehicle:
+    """``sumo.vehicle``: every getter reads a per-vehicle dict."""
+
+    def __init__(self) -> None:
+        self.cars: dict[str, dict[str, Any]] = {}
+        self.neighbours: dict[tuple[str, int], list[tuple[str, float]]] = {}
+        self.links: dict[str, list[tuple[Any, ...]]] = {}
+
+    def add(self, vid: str, **kw: Any) -> None:
+        car = {"speed": 0.0, "pos": 0.0, "lat": 0.0, "width": 2.0, "length": 5.0, "min_gap": 2.5, "lane": "e_0",
+               "xy": (0.0, 0.0), "angle": 90.0, "lane_index": 0}
+        car.update(kw)
+        self.cars[vid] = car
+
+    def getSpeed(self, vid: str) -> float:
+        return self.cars[vid]["speed"]
+
+    def getLanePosition(self, vid: str) -> float:
+        return self.cars[vid]["pos"]
+
+    def getLateralLanePosition(self, vid: str) -> float:
+        return self.cars[vid]["lat"]
+
+    def getWidth(self, vid: str) -> float:
+        return self.cars[vid]["width"]
+
+    def getLength(self, vid: str) -> float:
+        return self.cars[vid]["length"]
+
+    def getMinGap(self, vid: str) -> float:
+        return self.cars[vid]["min_gap"]
+
+    def getLaneID(self, vid: str) -> str:
+        return self.cars[vid]["lane"]
+
+    def getLaneIndex(self, vid: str) -> int:
+        return self.cars[vid]["lane_index"]
+
+    def getRoadID(self, vid: str) -> str:
+        return self.cars[vid]["lane"].rpartition("_")[0]
+
+    def getPosition(self, vid: str) -> tuple[float, float]:
+        return self.cars[vid]["xy"]
+
+    def getAngle(self, vid: str) -> float:
+        return self.cars[vid]["angle"]
+
+    def getNeighbors(self, vid: str, mode: int) -> list[tuple[str, float]]:
+        return self.neighbours.get((vid, mode), [])
+
+    def getNextLinks(self, vid: str) -> list[tuple[Any, ...]]:
+        return self.links.get(vid, [])
+
+
+class FakeConn:
+    def __init__(self) -> None:
+        self.vehicle = FakeVehicle()
+        self.lanes: dict[str, list[str]] = {}
+        self.tls_results: dict[str, dict[int, str]] = {}
+        self.sumo = SimpleNamespace(vehicle=self.vehicle, trafficlight=SimpleNamespace(getAllSubscriptionResults=lambda: self.tls_results))
+        self.tc = tc
+
+    def vehicles_on(self, lane: str) -> list[str]:
+        return self.lanes.get(lane, [])
+
+    def get_speed(self, vid: str) -> float:
+        return self.vehicle.getSpeed(vid)
+
+
+class FakeLane:
+    def __init__(self, length: float, width: float = 3.2, n_lanes: int = 3) -> None:
+        self.length, self.width, self.n_lanes = length, width, n_lanes
+
+    def getLength(self) -> float:
+        return self.length
+
+    def getWidth(self) -> float:
+        return self.width
+
+    def getEdge(self) -> Any:
+        return SimpleNamespace(getLaneNumber=lambda: self.n_lanes)
+
+
+class FakeNet:
+    def __init__(self, lanes: dict[str, FakeLane]) -> None:
+        self.lanes = lanes
+
+    def getLane(self, lane_id: str) -> FakeLane:
+        return self.lanes[lane_id]
+
+
+def lane_changes(conn: FakeConn, plan_decel: float = 4.0, lanes: dict[str, FakeLane] | None = None) -> LaneChanges:
+    net = FakeNet(lanes or {})
+    return LaneChanges(conn, SimpleNamespace(net=lambda: net), None, {}, plan_decel)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------------ closed forms
+def test_tactical_gap_is_the_headway_and_braking_distance_in_closed_form() -> None:
+    # 5 m + factor * (1 s * 20 m/s + (20^2 - 10^2) / (2 * 1 m/s^2)) = 5 + factor * 170
+    assert lc.tactical_gap(20.0, 10.0, 1.0) == pytest.approx(175.0)
+    assert lc.tactical_gap(20.0, 10.0, 0.5) == pytest.approx(90.0)
+    # A slower rear vehicle needs no braking term: 5 + 8.
+    assert lc.tactical_gap(8.0, 12.0, 1.0) == pytest.approx(13.0)
+    # Negative speeds (SUMO's -1001 for "unknown") count as standing.
+    assert lc.tactical_gap(-3.0, -7.0, 1.0) == pytest.approx(5.0)
+    assert lc.tactical_gap(6.0, -30.0, 1.0) == pytest.approx(5.0 + 6.0 + 18.0)
+
+
+def test_tactical_gap_follows_its_constants(monkeypatch: pytest.MonkeyPatch) -> None:
+    """At 2 m/s^2 of braking and 1.5 s of headway: 5 + 1.5 * 20 + 300 / 4."""
+    monkeypatch.setattr(lc, "TACTICAL_DECEL_MPS2", 2.0)
+    monkeypatch.setattr(lc, "TACTICAL_HEADWAY_S", 1.5)
+    assert lc.tactical_gap(20.0, 10.0, 1.0) == pytest.approx(5.0 + 30.0 + 75.0)
+
+
+def test_change_length_is_two_seconds_of_travel_within_its_bounds() -> None:
+    assert lc.change_length(12.0, math.inf) == pytest.approx(24.0)
+    assert lc.change_length(-12.0, math.inf) == pytest.approx(24.0)
+    assert lc.change_length(2.0, math.inf) == pytest.approx(10.0)
+    assert lc.change_length(45.0, math.inf) == pytest.approx(60.0)
+    assert lc.change_length(45.0, 33.0) == pytest.approx(33.0)
+
+
+def test_could_change_lane_reads_sumo_state_bits() -> None:
+    state = {}
+
+    def lcs(vid: str, direction: int) -> tuple[int, int]:
+        return state[direction]
+
+    free = tc.LCA_SPEEDGAIN
+    state[1] = (free, tc.LCA_BLOCKED)
+    assert lc.could_change_lane(lcs, "a", 1)
+    state[1] = (free | tc.LCA_BLOCKED, tc.LCA_BLOCKED)
+    assert not lc.could_change_lane(lcs, "a", 1)
+    state[1] = (tc.LCA_UNKNOWN, tc.LCA_BLOCKED)
+    assert not lc.could_change_lane(lcs, "a", 1)
+    # Just changed left: SUMO's state (not blocked, left bit) no longer applies.
+    state[1] = (free, tc.LCA_LEFT)
+    assert not lc.could_change_lane(lcs, "a", 1)
+    # The right bit does not say so for a change to the left, and vice versa.
+    state[1] = (free, tc.LCA_RIGHT)
+    assert lc.could_change_lane(lcs, "a", 1)
+    state[-1] = (free, tc.LCA_RIGHT)
+    assert not lc.could_change_lane(lcs, "a", -1)
+    state[-1] = (free, tc.LCA_LEFT)
+    assert lc.could_change_lane(lcs, "a", -1)
+
+
+# ------------------------------------------------------------ target lane
+@pytest.mark.parametrize("direction, side", [(1, 0), (-1, 1)])
+def test_target_lane_clear_at_its_boundary(direction: int, side: int) -> None:
+    """Follower at 14 m/s behind a changer at 10 m/s, 2 s change: it needs
+    5 + 2 * 4 = 13 m; a leader at 7 m/s: 5 + 2 * 3 = 11 m. The neighbour
+    look-up asks the side the change goes to (getNeighbors bit 0 = right)."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", speed=10.0)
+    v.add("f", speed=14.0)
+    v.add("l", speed=7.0)
+    lcs = lane_changes(conn)
+    for gap_f, gap_l, clear in [(13.0 + EPS, 11.0 + EPS, True), (13.0 - 1e-3, 11.0 + EPS, False), (13.0 + EPS, 11.0 - 1e-3, False)]:
+        v.neighbours = {("me", side): [("f", gap_f)], ("me", side | 2): [("l", gap_l)]}
+        assert lcs.target_lane_clear("me", direction, 10.0, 2.0) is clear, (gap_f, gap_l)
+    # Exactly at the needed gap (13 m and 11 m, exact in binary) is room enough.
+    v.neighbours = {("me", side): [("f", 13.0)], ("me", side | 2): [("l", 11.0)]}
+    assert lcs.target_lane_clear("me", direction, 10.0, 2.0)
+    # The other side's vehicles are not looked at.
+    v.neighbours = {("me", 1 - side): [("f", 0.0)], ("me", (1 - side) | 2): [("l", 0.0)]}
+    assert lcs.target_lane_clear("me", direction, 10.0, 2.0)
+    # A slower follower and a faster leader need the bare 5 m only.
+    v.neighbours = {("me", side): [("l", 5.0 + EPS)], ("me", side | 2): [("f", 5.0 + EPS)]}
+    assert lcs.target_lane_clear("me", direction, 10.0, 2.0)
+    v.neighbours = {("me", side): [("l", 5.0 - EPS)]}
+    assert not lcs.target_lane_clear("me", direction, 10.0, 2.0)
+
+
+def test_tactical_room_uses_the_tactical_gap_both_ways() -> None:
+    """Changer at 20 m/s, follower at 20 (5 + 20 = 25 m), leader at 10:
+    5 + 20 + 150 = 175 m at factor 1, 5 + 0.5 * 170 = 90 m at 0.5."""
+    conn = FakeConn()
+    lcs = lane_changes(conn)
+    near = ([(25.0 + EPS, 20.0)], [(175.0 + EPS, 10.0)])
+    assert lcs.tactical_room("me", 1, 20.0, 1.0, near)
+    assert not lcs.tactical_room("me", 1, 20.0, 1.0, ([(25.0 - EPS, 20.0)], [(175.0 + EPS, 10.0)]))
+    assert not lcs.tactical_room("me", 1, 20.0, 1.0, ([(25.0 + EPS, 20.0)], [(175.0 - EPS, 10.0)]))
+    assert lcs.tactical_room("me", 1, 20.0, 0.5, ([(15.0 + EPS, 20.0)], [(90.0 + EPS, 10.0)]))
+    assert not lcs.tactical_room("me", 1, 20.0, 0.5, ([(15.0 - EPS, 20.0)], [(90.0 + EPS, 10.0)]))
+
+
+def test_far_lane_room_checks_vehicles_behind_and_ahead() -> None:
+    """Changer front at 100 m (length 5, back at 95) at 10 m/s. A vehicle
+    on the far lane behind, front at 60 m, minGap 2.5, at 10 m/s: gap
+    95 - 60 - 2.5 = 32.5 m against 5 + 0.5 * 10 = 10 m. Ahead, back at
+    o_front - 5, gap o_front - 5 - 100 - 2.5 against the same 10 m at 10 m/s."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", pos=100.0, speed=10.0)
+    lcs = lane_changes(conn)
+    conn.lanes["e_2"] = ["b"]
+    v.add("b", pos=95.0 - 2.5 - 10.0 - EPS, speed=10.0)
+    assert lcs.far_lane_room("me", "e_2", 100.0, 10.0)
+    v.cars["b"]["pos"] = 95.0 - 2.5 - 10.0 + 1e-3
+    assert not lcs.far_lane_room("me", "e_2", 100.0, 10.0)
+    conn.lanes["e_2"] = ["a"]
+    v.add("a", pos=100.0 + 2.5 + 5.0 + 10.0 + EPS, speed=10.0)
+    assert lcs.far_lane_room("me", "e_2", 100.0, 10.0)
+    v.cars["a"]["pos"] = 100.0 + 2.5 + 5.0 + 10.0 - 1e-3
+    assert not lcs.far_lane_room("me", "e_2", 100.0, 10.0)
+    # Level with the front counts as behind (o_front <= front).
+    v.cars["a"]["pos"] = 100.0
+    assert not lcs.far_lane_room("me", "e_2", 100.0, 10.0)
+
+
+# ------------------------------------------------------------ leaders
+def test_tighter_leader_ties_and_unknown_speeds() -> None:
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("a", speed=8.0)
+    v.add("b", speed=8.0)
+    v.add("stand", speed=-5.0)
+    lcs = lane_changes(conn, plan_decel=4.0)
+    # Equal virtual obstacle distances: the first stays.
+    assert lcs.tighter_leader(("a", 10.0), ("b", 10.0)) == ("a", 10.0)
+    # 10 + 64 / 8 = 18 m against a standing one (negative speed) at 17.9 m and 18.1 m.
+    assert lcs.tighter_leader(("a", 10.0), ("stand", 17.9)) == ("stand", 17.9)
+    assert lcs.tighter_leader(("a", 10.0), ("stand", 18.1)) == ("a", 10.0)
+    # SUMO's "no leader" ("", -1) and a gap under -100 give way to the other.
+    assert lcs.tighter_leader(("a", -100.5), ("b", 50.0)) == ("b", 50.0)
+    assert lcs.tighter_leader(("a", -100.0), ("b", 50.0)) == ("a", -100.0)
+    assert lcs.tighter_leader(("", 3.0), ("b", 50.0)) == ("b", 50.0)
+    assert lcs.tighter_leader((), ("b", 50.0)) == ("b", 50.0)
+
+
+def test_soft_leaders_keep_the_tighter_per_vehicle_and_count_them() -> None:
+    conn = FakeConn()
+    v = conn.vehicle
+    for vid in ("f", "c", "m", "n", "g"):
+        v.add(vid, speed=0.0)
+    lcs = lane_changes(conn)
+    lcs._courtesy = {"f": ("c", 30.0), "g": ("gone", 5.0)}
+    lcs._merge_leads = {"f": ("n", 20.0), "m": ("n", 4.0)}
+    index = {"f": 0, "c": 1, "m": 2, "n": 3, "g": 4}
+    assert has_soft(lcs)
+    soft = sorted(lcs.soft_leaders(index))
+    # f: courtesy to c at 30 m and lining up behind n at 20 m -> the tighter, n.
+    assert soft == [(0, "n", 20.0), (2, "n", 4.0)]
+    assert lcs.counts["courtesy_steps"] == 1 and lcs.counts["merge_lead_steps"] == 2
+    # Taken: the next step starts with none.
+    assert not has_soft(lcs) and lcs.soft_leaders(index) == []
+    # A courtesy follower that is not controlled (not in index) is skipped.
+    lcs._merge_leads = {"x": ("n", 4.0)}
+    assert has_soft(lcs) and lcs.soft_leaders(index) == []
+
+
+def has_soft(lcs: LaneChanges) -> bool:
+    return lcs.has_soft_leaders()
+
+
+def test_ask_courtesy_picks_the_nearest_follower_that_can_brake_gently() -> None:
+    """Changer front at 100 m (length 5: back 95) at 10 m/s. Followers on the
+    target lane at 80 m and 40 m (minGap 2.5), both controlled: gaps
+    95 - f - 2.5 - 5 - 1 = 6.5 m and 46.5 m. The near one at 20 m/s closes
+    at 10 m/s, needs 100 / (2 * 2) = 25 m > 6.5 m: it passes; the far one
+    at 20 m/s has 46.5 m: it gives way."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", pos=100.0, speed=10.0)
+    v.add("near", pos=80.0, speed=20.0)
+    v.add("far", pos=40.0, speed=20.0)
+    v.add("ahead", pos=96.0, speed=30.0)
+    conn.lanes["t_0"] = ["far", "near", "ahead"]
+    lcs = lane_changes(conn)
+    lcs.active = {"near": None, "far": None, "ahead": None}  # type: ignore[dict-item]
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
+    assert lcs._courtesy == {"far": ("me", pytest.approx(46.5))}
+    # Slow enough to brake gently: closing 5 m/s needs 6.25 m < 6.5 m.
+    lcs._courtesy = {}
+    v.cars["near"]["speed"] = 15.0
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
+    assert lcs._courtesy == {"near": ("me", pytest.approx(6.5))}
+    # A tighter request from another changer replaces a looser one, not the reverse.
+    v.add("me2", length=4.0)  # gap 7.5 m: looser
+    lcs.ask_courtesy("me2", "t_0", 100.0, 10.0)
+    assert lcs._courtesy["near"][0] == "me"
+    v.add("me3", length=6.0)
+    lcs.ask_courtesy("me3", "t_0", 100.0, 12.0)  # closing 3 m/s: 2.25 m of braking
+    assert lcs._courtesy["near"] == ("me3", pytest.approx(5.5))
+    # Beyond COURTESY_RANGE_M (150 m) nobody is asked; SUMO's own drivers are skipped.
+    lcs._courtesy = {}
+    v.cars["near"]["pos"] = 95.0 - 150.0 - EPS
+    conn.lanes["t_0"] = ["near"]
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
+    assert lcs._courtesy == {}
+    v.cars["near"]["pos"] = 95.0 - 150.0  # exactly at the range: asked
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
+    assert "near" in lcs._courtesy
+    lcs._courtesy = {}
+    lcs.active = {}
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
+    assert lcs._courtesy == {}
+
+
+def test_ask_courtesy_needs_more_than_half_a_metre() -> None:
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", pos=100.0)
+    # gap = 95 - f - 2.5 - 6 = 0.5 exactly at f = 86 (standing: no closing speed).
+    v.add("f", pos=86.0, speed=0.0)
+    conn.lanes["t_0"] = ["f"]
+    lcs = lane_changes(conn)
+    lcs.active = {"f": None}  # type: ignore[dict-item]
+    lcs.ask_courtesy("me", "t_0", 100.0, 0.0)
+    assert lcs._courtesy == {}
+    v.cars["f"]["pos"] = 86.0 - 1e-3
+    lcs.ask_courtesy("me", "t_0", 100.0, 0.0)
+    assert "f" in lcs._courtesy
+
+
+def test_wait_for_gap_lines_up_behind_the_tighter_neighbour() -> None:
+    """Leaders on the target (right: mode 2 | 1) lane and one alongside
+    (follower list, gap < 0) taken at gap 0."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", pos=100.0, speed=10.0)
+    v.add("lead", speed=10.0)
+    v.add("side", speed=10.0)
+    v.add("back", speed=10.0)
+    lcs = lane_changes(conn)
+    v.neighbours = {("me", 3): [("lead", 12.0)], ("me", 1): [("back", 7.0)]}
+    lcs.wait_for_gap("me", -1, "t_0", 100.0, 10.0)
+    assert lcs._merge_leads == {"me": ("lead", 12.0)}
+    for alongside in (-2.0, -0.5):
+        v.neighbours = {("me", 3): [("lead", 12.0)], ("me", 1): [("side", alongside), ("back", 7.0)]}
+        lcs.wait_for_gap("me", -1, "t_0", 100.0, 10.0)
+        assert lcs._merge_leads == {"me": ("side", 0.0)}, alongside
+    # To the left: bits 2 and 0; a leader alongside (negative gap) is at 0.
+    lcs._merge_leads = {}
+    v.neighbours = {("me", 2): [("lead", -1.0)]}
+    lcs.wait_for_gap("me", 1, "t_1", 100.0, 10.0)
+    assert lcs._merge_leads == {"me": ("lead", 0.0)}
+    lcs._merge_leads = {}
+    v.neighbours = {}
+    lcs.wait_for_gap("me", 1, "t_1", 100.0, 10.0)
+    assert lcs._merge_leads == {}
+
+
+# ------------------------------------------------------------ junctions
+def junctions(conn: FakeConn, foes: list[tuple[Any, ...]], plan_decel: float = 4.0) -> Junctions:
+    network = SimpleNamespace(internal_foes=lambda via: foes, internal_vias={":j_w"}, waiting_point_after=lambda via: (None, 0.0),
+                              junction_lanes=lambda via: (None, []))
+    return Junctions(conn, network, None, None, plan_decel)  # type: ignore[arg-type]
+
+
+def test_internal_junction_busy_with_a_foe_inside_or_near() -> None:
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me")
+    conn.lanes[":j_foe"] = ["me"]
+    j = junctions(conn, [(":j_foe", None, 50.0, "", -1)])
+    assert not j.internal_junction_busy("me", ":j_w"), "the vehicle itself is no foe"
+    for foe in ("x", "a"):  # any other vehicle, whatever its id
+        conn.lanes[":j_foe"] = ["me", foe]
+        assert j.internal_junction_busy("me", ":j_w"), foe
+    # On the incoming lane, 50 m long: busy within 4 s (at 10 m/s: 40 m) or 5 m of the line.
+    conn.lanes = {"in_0": ["o"]}
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "", -1)])
+    v.add("o", pos=10.0 + 1e-3, speed=10.0)
+    assert j.internal_junction_busy("me", ":j_w")
+    v.cars["o"]["pos"] = 10.0 - 1e-3
+    assert not j.internal_junction_busy("me", ":j_w")
+    assert j.internal_junction_busy("me", ":j_w", horizon_s=4.1)
+    v.cars["o"].update(pos=45.0 + 1e-3, speed=0.0)
+    assert j.internal_junction_busy("me", ":j_w")
+    v.cars["o"]["pos"] = 45.0 - 1e-3
+    assert not j.internal_junction_busy("me", ":j_w")
+
+
+def test_internal_junction_busy_reads_the_foes_light() -> None:
+    """Foe at 23 m from its line at 13.8 m/s (the traced case): at yellow it
+    needs 13.8 * 1 + 13.8^2 / 6 = 45.5 m to stop, so it comes through; at
+    red it stops; at green it is 1.7 s away: busy."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me")
+    v.add("o", pos=50.0 - 23.0, speed=13.8)
+    conn.lanes = {"in_0": ["o"]}
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "tl", 1)])
+    for state, busy in [("rGr", True), ("ryr", True), ("rYr", True), ("grg", False), ("GsG", True), ("rgr", True), ("ror", True), ("rOr", True), ("rur", False)]:
+        j.tls_state["tl"] = state
+        assert j.internal_junction_busy("me", ":j_w") is busy, state
+    # Yellow: just able to stop (45.54 m) is not busy; 1 cm closer is.
+    need = 13.8 + 13.8**2 / 6.0
+    j.tls_state["tl"] = "ryr"
+    v.cars["o"]["pos"] = 50.0 - need - 0.01
+    assert not j.internal_junction_busy("me", ":j_w")
+    v.cars["o"]["pos"] = 50.0 - need + 0.01
+    assert j.internal_junction_busy("me", ":j_w")
+    # A link index outside the state string (unknown): the foe is looked at as at green.
+    v.cars["o"]["pos"] = 30.0
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "tl", 3)])
+    j.tls_state["tl"] = "rrr"
+    assert j.internal_junction_busy("me", ":j_w")
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "tl", -1)])
+    j.tls_state["tl"] = "rrr"
+    assert j.internal_junction_busy("me", ":j_w")
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "tl", 0)])
+    j.tls_state["tl"] = "r"
+    assert not j.internal_junction_busy("me", ":j_w")
+    # The vehicle itself on the incoming lane is no foe.
+    conn.lanes = {"in_0": ["me"]}
+    v.cars["me"].update(pos=49.0, speed=10.0)
+    j.tls_state["tl"] = "G"
+    assert not j.internal_junction_busy("me", ":j_w")
+
+
+def test_refresh_tls_passes_on_changed_lights_only() -> None:
+    conn = FakeConn()
+    sent: list[tuple[int, str]] = []
+    fleet = SimpleNamespace(set_signal=lambda light, state: sent.append((light, state)))
+    tracks = SimpleNamespace(lights=SimpleNamespace(id={"a": 0, "b": 1}.__getitem__))
+    j = Junctions(conn, None, tracks, fleet, 4.0)  # type: ignore[arg-type]
+    key = tc.TL_RED_YELLOW_GREEN_STATE
+    conn.tls_results = {"a": {key: "Gr"}, "b": {key: "rG"}}
+    j.refresh_tls()
+    assert sorted(sent) == [(0, "Gr"), (1, "rG")]
+    sent.clear()
+    conn.tls_results = {"a": {key: "Gr"}, "b": {key: "ry"}}
+    j.refresh_tls()
+    assert sent == [(1, "ry")] and j.tls_state == {"a": "Gr", "b": "ry"}
+
+
+def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tuple[Any, float] = (None, 0.0)) -> tuple[FakeConn, Junctions, dict[str, Any]]:
+    conn = FakeConn()
+    conn.vehicle.add("me", speed=10.0)
+    conn.vehicle.links["me"] = links
+    seen: dict[str, Any] = {"busy": False, "blocked": False, "horizon": None}
+    fleet = SimpleNamespace(next_stop=lambda slot: (100.0, 0, 0, 0, 7), s_front=lambda slot: 80.0)
+    tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda k: via))
+    network = SimpleNamespace(internal_vias={":j_w"}, waiting_point_after=lambda v: waiting)
+    j = Junctions(conn, network, tracks, fleet, 4.0)  # type: ignore[arg-type]
+
+    def busy(vid: str, lane: str, horizon_s: float = jn.INTERNAL_YIELD_S) -> bool:
+        seen["horizon"] = horizon_s
+        seen["lane"] = lane
+        return bool(seen["busy"])
+
+    j.internal_junction_busy = busy  # type: ignore[method-assign]
+    j.junction_blocked = lambda vid, lane: bool(seen["blocked"])  # type: ignore[method-assign]
+    return conn, j, seen
+
+
+def test_must_yield_on_a_link_without_priority_with_foes() -> None:
+    # getNextLinks rows: (lane, has priority, is open, has foe, via lane, ...)
+    _, j, seen = yield_setup([("x", True, True, True, "other"), ("in_1", False, True, True, "in_0_to")])
+    assert j.must_yield("me", 0)
+    _, j, seen = yield_setup([("in_1", True, True, True, "in_0_to")])
+    assert not j.must_yield("me", 0)
+    _, j, seen = yield_setup([("in_1", False, True, False, "in_0_to")])
+    assert not j.must_yield("me", 0)
+    seen["blocked"] = True
+    assert j.must_yield("me", 0), "a vehicle inside the junction in the way"
+    # Only the first link through the via counts.
+    _, j, seen = yield_setup([("in_1", True, True, False, "in_0_to"), ("in_1", False, True, True, "in_0_to")])
+    assert not j.must_yield("me", 0)
+    conn, j, seen = yield_setup([])
+    j.fleet.next_stop = lambda slot: None
+    seen["blocked"] = True
+    assert not j.must_yield("me", 0), "no stop ahead: nothing to yield at"
+
+
+def test_must_yield_at_an_internal_waiting_point_asks_the_foes() -> None:
+    _, j, seen = yield_setup([], via=":j_w")
+    assert not j.must_yield("me", 0)
+    seen["busy"] = True
+    assert j.must_yield("me", 0) and seen["lane"] == ":j_w" and seen["horizon"] == jn.INTERNAL_YIELD_S
+
+
+def test_must_yield_holds_a_fast_turner_at_the_entry() -> None:
+    """Stop 20 m ahead (100 - 80), waiting point 6 m in, 1 m short: room
+    25 m. Gentle stop at 0.5 * 4 = 2 m/s^2 from v needs v^2 / 4 m: held
+    when v > 10 m/s, and it looks 4 s + 25 m / v ahead."""
+    conn, j, seen = yield_setup([], waiting=(":j_w", 6.0))
+    seen["busy"] = True
+    conn.vehicle.cars["me"]["speed"] = 10.0 + 1e-3
+    assert j.must_yield("me", 0)
+    assert seen["horizon"] == pytest.approx(4.0 + 25.0 / (10.0 + 1e-3)) and seen["lane"] == ":j_w"
+    conn.vehicle.cars["me"]["speed"] = 10.0 - 1e-3
+    seen["horizon"] = None
+    assert not j.must_yield("me", 0) and seen["horizon"] is None
+    conn.vehicle.cars["me"]["speed"] = 12.0
+    seen["busy"] = False
+    assert not j.must_yield("me", 0)
+
+
+def test_junction_blocked_by_a_body_within_the_half_width() -> None:
+    """Path through the junction along y = 0 from x = 0 to 20; the entering
+    vehicle 2 m wide: reach 1 + 0.3 m, plus the other's half width 1 m. A
+    vehicle inside facing north (angle 0) with its front at (10, y) and 5 m
+    long reaches down to y - 5: blocked while y - 5 < 2.3."""
+    import numpy as np
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", width=2.0)
+    v.add("o", width=2.0, length=5.0, angle=0.0, xy=(10.0, 7.3 - 1e-3))
+    conn.lanes[":j_0"] = ["me", "o"]
+    path = np.array([[0.0, 0.0], [20.0, 0.0]])
+    network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]))
+    j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
+    assert j.junction_blocked("me", "in_0") and j.counts["inside_junction_waits"] == 1
+    v.cars["o"]["xy"] = (10.0, 7.3 + 1e-3)
+    assert not j.junction_blocked("me", "in_0") and j.counts["inside_junction_waits"] == 1
+    # Exactly 2.3 m away (7.3 - 5 and 1 + 0.3 + 1 round to the same double): not within.
+    v.cars["o"]["xy"] = (10.0, 7.3)
+    assert not j.junction_blocked("me", "in_0")
+    network.junction_lanes = lambda via: (path, [])
+    v.cars["o"]["xy"] = (10.0, 0.0)
+    assert not j.junction_blocked("me", "in_0")
