@@ -82,6 +82,8 @@ class FakeConn:
         self.tls_results: dict[str, dict[int, str]] = {}
         self.sumo = SimpleNamespace(vehicle=self.vehicle, trafficlight=SimpleNamespace(getAllSubscriptionResults=lambda: self.tls_results))
         self.tc = tc
+        # The lights' states come from the subscription results (as over TraCI).
+        self.use_subscriptions = True
 
     def vehicles_on(self, lane: str) -> list[str]:
         return self.lanes.get(lane, [])
@@ -459,7 +461,9 @@ def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tup
     seen: dict[str, Any] = {"busy": False, "blocked": False, "horizon": None}
     fleet = SimpleNamespace(next_stop=lambda slot: (100.0, 0, 0, 0, 7), s_front=lambda slot: 80.0)
     tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda k: via))
-    network = SimpleNamespace(internal_vias={":j_w"}, waiting_point_after=lambda v: waiting)
+    # No link state known (""): the decision rests on SUMO's getNextLinks; no zipper.
+    network = SimpleNamespace(internal_vias={":j_w"}, waiting_point_after=lambda v: waiting,
+                              is_zipper=lambda v: False, link_state=lambda v: "")
     j = Junctions(conn, network, tracks, fleet, 4.0)  # type: ignore[arg-type]
 
     def busy(vid: str, lane: str, horizon_s: float = jn.INTERNAL_YIELD_S) -> bool:
