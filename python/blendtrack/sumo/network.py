@@ -143,21 +143,7 @@ class Network:
         the right; a connection from the left gives way to this one."""
         hit = self._prohibitors.get(via)
         if hit is None:
-            net = self.net()
-            hit = []
-            c = self.connection_of(via)
-            if c is not None:
-                node = c.getFrom().getToNode()
-                for other in node.getConnections():
-                    if other is c or not node.forbids(other, c):
-                        continue
-                    chain = [part.getID() for part in _via_chain(net, other)]
-                    if not chain:
-                        continue
-                    src = other.getFromLane()
-                    hit.append((chain[0], src.getID(), float(src.getLength()), other.getTLSID() or "", int(other.getTLLinkIndex())))
-                    hit.extend((part, None, 0.0, "", -1) for part in chain[1:])
-            self._prohibitors[via] = hit
+            hit = self._prohibitors[via] = self._conflicting(via, lambda node, c, other: node.forbids(other, c))
         return hit
 
     def internal_foes(self, via: str) -> list[tuple[str, str | None, float, str, int]]:
@@ -168,23 +154,35 @@ class Network:
         crashes a later simulation in the same process (libsumo 1.28)."""
         hit = self._foes.get(via)
         if hit is None:
-            net = self.net()
-            hit = []
-            c = self.connection_of(via)
-            if c is not None:
-                node = c.getFrom().getToNode()
-                i = node.getLinkIndex(c)
-                for other in node.getConnections():
-                    j = node.getLinkIndex(other)
-                    if other is c or i < 0 or j < 0 or not node.areFoes(i, j):
-                        continue
-                    chain = [part.getID() for part in _via_chain(net, other)]
-                    if not chain:
-                        continue
-                    src = other.getFromLane()
-                    hit.append((chain[0], src.getID(), float(src.getLength()), other.getTLSID() or "", int(other.getTLLinkIndex())))
-                    hit.extend((part, None, 0.0, "", -1) for part in chain[1:])
-            self._foes[via] = hit
+
+            def foes(node: Any, c: Any, other: Any) -> bool:
+                i, j = node.getLinkIndex(c), node.getLinkIndex(other)
+                return i >= 0 and j >= 0 and bool(node.areFoes(i, j))
+
+            hit = self._foes[via] = self._conflicting(via, foes)
+        return hit
+
+    def _conflicting(self, via: str, conflicts: Any) -> list[tuple[str, str | None, float, str, int]]:
+        """The junction lanes of the connections ``other`` of ``via``'s
+        junction for which ``conflicts(node, c, other)`` holds (``c``: the
+        connection of ``via``): the first of each chain with (the normal lane
+        leading into it, that lane's length, its traffic light, link index),
+        the rest of the chain with (None, 0, "", -1)."""
+        net = self.net()
+        hit: list[tuple[str, str | None, float, str, int]] = []
+        c = self.connection_of(via)
+        if c is None:
+            return hit
+        node = c.getFrom().getToNode()
+        for other in node.getConnections():
+            if other is c or not conflicts(node, c, other):
+                continue
+            chain = [part.getID() for part in _via_chain(net, other)]
+            if not chain:
+                continue
+            src = other.getFromLane()
+            hit.append((chain[0], src.getID(), float(src.getLength()), other.getTLSID() or "", int(other.getTLLinkIndex())))
+            hit.extend((part, None, 0.0, "", -1) for part in chain[1:])
         return hit
 
     def lanes_after(self, via: str) -> list[tuple[str, float]]:
