@@ -9,34 +9,16 @@
 use blendtrack::*;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::hint::black_box;
-use std::path::PathBuf;
 use std::sync::Arc;
 
-fn states_along(path: &Path, spacing: f64) -> Vec<VehicleState> {
-    let n = (path.length() / spacing) as usize;
-    (0..n)
-        .map(|i| {
-            let s = i as f64 * spacing;
-            let c = path.point_at(s);
-            let h = path.heading_at(s);
-            VehicleState {
-                x_m: c.x - 0.5 * h.sin(),
-                y_m: c.y + 0.5 * h.cos(),
-                theta_rad: h + 0.02,
-                v_mps: 30.0,
-                delta_rad: 0.0,
-            }
-        })
-        .collect()
-}
+#[path = "common/nurburgring.rs"]
+mod nurburgring;
 
 fn bench(c: &mut Criterion) {
-    let file =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/tracks/Nuerburgring.csv");
-    let path =
-        Path::from_tum_csv(&file, true).expect("../shared/tracks/Nuerburgring.csv beside the repo");
+    let path = Path::from_tum_csv(&nurburgring::track_file(), true)
+        .expect("../shared/tracks/Nuerburgring.csv beside the repo");
     let vp = VehicleParams::default();
-    let states = states_along(&path, 0.3);
+    let states = nurburgring::states_along(&path, 0.3);
     let mut group = c.benchmark_group("controller_step");
     group.throughput(Throughput::Elements(1));
     for (name, kind, horizon) in [

@@ -4,12 +4,12 @@ use blendtrack::*;
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::Point2;
 use std::hint::black_box;
-use std::path::PathBuf;
+
+#[path = "common/nurburgring.rs"]
+mod nurburgring;
 
 fn bench(c: &mut Criterion) {
-    let file =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/tracks/Nuerburgring.csv");
-    let path = Path::from_tum_csv(&file, true).unwrap();
+    let path = Path::from_tum_csv(&nurburgring::track_file(), true).unwrap();
     let cfg = ControllerConfig::default();
     let cor = Corridor::new(&path, &cfg);
     let n = (path.length() / 0.3) as usize;

@@ -8,13 +8,15 @@
 //! ```
 //!
 //! The difference of the two totals over 20,000 is the cost of one step
-//! (the track's loading cancels). The states are those of the
-//! `controller_step` bench: 0.3 m apart, 0.5 m off the centreline.
+//! (the track's loading cancels). The states are the `controller_step`
+//! bench's (`benches/common/nurburgring.rs`).
 
 use blendtrack::*;
 use std::hint::black_box;
-use std::path::PathBuf;
 use std::sync::Arc;
+
+#[path = "../benches/common/nurburgring.rs"]
+mod nurburgring;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
@@ -24,30 +26,14 @@ fn main() {
         _ => LateralKind::Blend,
     };
     let steps: usize = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(20_000);
-    let file =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/tracks/Nuerburgring.csv");
-    let path = match Path::from_tum_csv(&file, true) {
+    let path = match Path::from_tum_csv(&nurburgring::track_file(), true) {
         Ok(p) => p,
         Err(e) => {
             eprintln!("step_count: {e}");
             std::process::exit(2);
         }
     };
-    let n = (path.length() / 0.3) as usize;
-    let states: Vec<VehicleState> = (0..n)
-        .map(|i| {
-            let s = i as f64 * 0.3;
-            let c = path.point_at(s);
-            let h = path.heading_at(s);
-            VehicleState {
-                x_m: c.x - 0.5 * h.sin(),
-                y_m: c.y + 0.5 * h.cos(),
-                theta_rad: h + 0.02,
-                v_mps: 30.0,
-                delta_rad: 0.0,
-            }
-        })
-        .collect();
+    let states = nurburgring::states_along(&path, 0.3);
     let cfg = ControllerConfig {
         lateral_controller: kind,
         preferred_speed: 30.0,
