@@ -129,6 +129,10 @@ class Stops:
         #: vid -> its next stop, for the vehicles with stops left.
         self.pending: dict[str, _Pending] = {}
         self.counts = {"stops_served": 0, "stops_skipped": 0}
+        #: SUMO's ``isStopped`` answers of this step (``dwelling`` asks
+        #: before the placement check, ``update`` reuses them later in the
+        #: same step: no SUMO step in between).
+        self._stopped: dict[str, bool] = {}
 
     def take_over(self, act: Active) -> None:
         """``act`` was just taken over: it is followed if SUMO has stops for it."""
@@ -144,12 +148,14 @@ class Stops:
         owns their place (a parking stop takes the vehicle off its lane), so
         the placement check leaves them alone."""
         is_stopped = self.conn.sumo.vehicle.isStopped
+        self._stopped = {}
 
         def stopped(vid: str) -> bool:
             try:
-                return bool(is_stopped(vid))
+                answer = self._stopped[vid] = bool(is_stopped(vid))
             except Exception:
                 return False  # gone: the check for vanished vehicles sees to it
+            return answer
 
         return {vid for vid, p in self.pending.items() if p.dwelling or stopped(vid)}
 
@@ -167,10 +173,13 @@ class Stops:
         before ``RouteFleet.plan``, after every retrack of the step."""
         for vid, p in list(self.pending.items()):
             self._update(vid, p)
+        self._stopped = {}
 
     def _update(self, vid: str, p: _Pending) -> None:
         v = self.conn.sumo.vehicle
-        stopped = bool(v.isStopped(vid))
+        stopped = self._stopped.get(vid)
+        if stopped is None:
+            stopped = bool(v.isStopped(vid))
         if p.dwelling and not stopped:
             # SUMO ended the stop: served; on to the next one.
             p.act.record.stops_served += 1
