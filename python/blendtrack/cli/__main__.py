@@ -1,0 +1,7 @@
+"""``python -m blendtrack.cli``: the ``blendtrack`` command."""
+
+import sys
+
+from blendtrack.cli import main
+
+sys.exit(main())
