@@ -12,7 +12,7 @@ use crate::curve_speed::{curve_accel, CurveProfile};
 use crate::error::{ConfigError, StateError};
 use crate::lateral::{
     auto_alpha, blend, lookahead_forcing, pure_pursuit_command, rear_command, stanley_command,
-    travel_heading, AutoAlphaInputs, AutoAlphaParams, LateralGains,
+    travel_heading, AutoAlphaInputs, AutoAlphaParams, LateralGains, Travel,
 };
 use crate::longitudinal::{longitudinal_accel, relevance_distance, Corridor, Obstacle};
 use crate::path::{wrap_angle, Path};
@@ -345,14 +345,19 @@ impl Controller {
         alpha: f64,
     ) -> (f64, f64, f64, f64) {
         let dir = self.cfg.direction;
+        let travel = Travel {
+            theta_rad,
+            speed_abs: speed,
+            direction: dir,
+        };
         let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
             LateralKind::Blend => {
-                let df = stanley_command(front, theta_rad, speed, dir, &self.gains());
-                let dr = rear_command(path, rear, theta_rad, speed, dir, &self.gains());
+                let df = stanley_command(front, &travel, &self.gains());
+                let dr = rear_command(path, rear, &travel, &self.gains());
                 (alpha, df, dr)
             }
             LateralKind::Stanley => {
-                let df = stanley_command(front, theta_rad, speed, dir, &self.gains());
+                let df = stanley_command(front, &travel, &self.gains());
                 (1.0, df, f64::NAN)
             }
             LateralKind::PurePursuit => {
@@ -360,9 +365,7 @@ impl Controller {
                     path,
                     (rear_pt.x, rear_pt.y),
                     rear,
-                    theta_rad,
-                    speed,
-                    dir,
+                    &travel,
                     &self.gains(),
                 );
                 (0.0, f64::NAN, dr)

@@ -152,28 +152,41 @@ pub fn travel_heading(theta_rad: f64, direction: Direction) -> f64 {
     }
 }
 
+/// How the vehicle moves, as the laws see it: its heading `theta_rad`
+/// (rad, the body's, whatever the direction), its speed magnitude
+/// `speed_abs` (m/s) and its direction of travel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Travel {
+    pub theta_rad: f64,
+    pub speed_abs: f64,
+    pub direction: Direction,
+}
+
+impl Travel {
+    /// The heading along the direction of travel and its error against the
+    /// path's heading at the projection `at` (rad, wrapped).
+    #[inline]
+    fn heading_and_error(&self, at: &Projection) -> (f64, f64) {
+        let th = travel_heading(self.theta_rad, self.direction);
+        (th, wrap_angle(th - at.heading_rad))
+    }
+}
+
 /// Stanley command at the front axle for either direction.
-pub fn stanley_command(
-    front: &Projection,
-    theta_rad: f64,
-    speed_abs: f64,
-    direction: Direction,
-    g: &LateralGains,
-) -> f64 {
-    let th = travel_heading(theta_rad, direction);
-    let e_theta = wrap_angle(th - front.heading_rad);
-    let k = match direction {
+pub fn stanley_command(front: &Projection, m: &Travel, g: &LateralGains) -> f64 {
+    let (_, e_theta) = m.heading_and_error(front);
+    let k = match m.direction {
         Direction::Forward => g.cfg.stanley_gain,
         Direction::Backward => g.cfg.stanley_gain_reverse,
     };
     let law = stanley(
         front.lateral_m,
         e_theta,
-        speed_abs,
+        m.speed_abs,
         k,
         g.cfg.stanley_softening_mps,
     );
-    match direction {
+    match m.direction {
         Direction::Forward => law,
         Direction::Backward => {
             // Feed-forward that makes "front axle on the path" the equilibrium (see module docs).
@@ -187,22 +200,14 @@ pub fn stanley_command(
 }
 
 /// Curvature-based command at the rear axle for either direction.
-pub fn rear_command(
-    path: &Path,
-    rear: &Projection,
-    theta_rad: f64,
-    speed_abs: f64,
-    direction: Direction,
-    g: &LateralGains,
-) -> f64 {
-    let th = travel_heading(theta_rad, direction);
-    let e_theta = wrap_angle(th - rear.heading_rad);
-    let d = g.target_distance(speed_abs);
-    let l = g.curvature_lookahead(speed_abs);
+pub fn rear_command(path: &Path, rear: &Projection, m: &Travel, g: &LateralGains) -> f64 {
+    let (th, e_theta) = m.heading_and_error(rear);
+    let d = g.target_distance(m.speed_abs);
+    let l = g.curvature_lookahead(m.speed_abs);
     let dtheta = wrap_angle(path.heading_at(rear.s + l) - th);
     let law = rear_first_term(g.wheelbase_m, rear.lateral_m, e_theta, d)
         + rear_second_term(g.wheelbase_m, dtheta, l);
-    direction.sign() * law
+    m.direction.sign() * law
 }
 
 /// Pure pursuit at the rear axle toward the path point `l_d` ahead of the foot.
@@ -210,18 +215,16 @@ pub fn pure_pursuit_command(
     path: &Path,
     rear_xy: (f64, f64),
     rear: &Projection,
-    theta_rad: f64,
-    speed_abs: f64,
-    direction: Direction,
+    m: &Travel,
     g: &LateralGains,
 ) -> f64 {
-    let th = travel_heading(theta_rad, direction);
-    let ld = g.cfg.pure_pursuit_gain_s * speed_abs + g.cfg.pure_pursuit_min_lookahead_m;
+    let th = travel_heading(m.theta_rad, m.direction);
+    let ld = g.cfg.pure_pursuit_gain_s * m.speed_abs + g.cfg.pure_pursuit_min_lookahead_m;
     let t = path.point_at(rear.s + ld);
     let (dx, dy) = (t.x - rear_xy.0, t.y - rear_xy.1);
     let (s, c) = th.sin_cos();
     let law = pursuit_steering(g.wheelbase_m, c * dx + s * dy, -s * dx + c * dy);
-    direction.sign() * law
+    m.direction.sign() * law
 }
 
 /// The paper's blend (eq. 4).
@@ -420,6 +423,14 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
+    fn travel(theta_rad: f64, speed_abs: f64, direction: Direction) -> Travel {
+        Travel {
+            theta_rad,
+            speed_abs,
+            direction,
+        }
+    }
+
     /// The default config but a stiffer forward Stanley gain (with E = 2.6 m).
     fn stiff_config() -> ControllerConfig {
         ControllerConfig {
@@ -490,7 +501,7 @@ mod tests {
         let path = Path::straight(200.0, 1.0).unwrap();
         let rear = (50.0, 1.0);
         let pr = path.project(&nalgebra::Point2::new(rear.0, rear.1));
-        let d = pure_pursuit_command(&path, rear, &pr, 0.0, 10.0, Direction::Forward, &g);
+        let d = pure_pursuit_command(&path, rear, &pr, &travel(0.0, 10.0, Direction::Forward), &g);
         let expected = (2.0 * 2.6 * -1.0 / 50.0f64).atan();
         assert!((d - expected).abs() < 1e-12, "{d} vs {expected}");
     }
@@ -506,7 +517,7 @@ mod tests {
                     let p = path.point_at(s);
                     let th = path.heading_at(s);
                     let pr = path.project(&p);
-                    let d = rear_command(&path, &pr, th, v, Direction::Forward, &g);
+                    let d = rear_command(&path, &pr, &travel(th, v, Direction::Forward), &g);
                     let expected = (2.6 / r).atan();
                     assert!(
                         (d - expected).abs() < 1e-3,
@@ -514,7 +525,7 @@ mod tests {
                     );
                     // Backwards along the same path (heading flipped): the
                     // steering that keeps the rear axle on the circle is the negative.
-                    let db = rear_command(&path, &pr, th + PI, v, Direction::Backward, &g);
+                    let db = rear_command(&path, &pr, &travel(th + PI, v, Direction::Backward), &g);
                     assert!((db + expected).abs() < 1e-3, "backward R={r}: {db}");
                 }
             }

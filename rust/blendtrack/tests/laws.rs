@@ -4,7 +4,7 @@
 //! stability and feed-forward, each against a computation that does not
 //! reuse the code's own formula.
 
-use blendtrack::lateral::{blend, stanley_command, LateralGains};
+use blendtrack::lateral::{blend, stanley_command, LateralGains, Travel};
 use blendtrack::longitudinal::stopping_accel;
 use blendtrack::*;
 use std::sync::Arc;
@@ -191,7 +191,12 @@ fn reverse_rates(e_f: f64, e_t: f64, v: f64, g: &LateralGains) -> (f64, f64) {
         curvature_per_m: 0.0,
         segment: 0,
     };
-    let delta = stanley_command(&front, theta, v, Direction::Backward, g);
+    let travel = Travel {
+        theta_rad: theta,
+        speed_abs: v,
+        direction: Direction::Backward,
+    };
+    let delta = stanley_command(&front, &travel, g);
     // Reversing at speed -v: theta' = -v tan(delta) / E; the front axle moves
     // with velocity -v (cos(theta + delta), sin(theta + delta)).
     let theta_rate = -v * delta.tan() / g.wheelbase_m;
