@@ -155,6 +155,22 @@ def _plain(cfg: Path, out: Path, hook: Callable[[SumoRun, float], None] | None =
     return watch
 
 
+def _safe_run(tmp_path: Path, node_type: str, **crossing: Any) -> tuple[Path, SumoRun, Watch]:
+    """The crossing of ``node_type`` (MAJOR and MINOR flows, 300 s) driven
+    with its controlled vType: the configuration, the run and what was
+    watched, after the checks every junction kind shares (at least 20
+    controlled vehicles: the minor flow departs one with probability 0.1 a
+    second, 30 expected in 300 s, so 20 is two standard deviations below;
+    no incident)."""
+    cfg = _crossing(tmp_path / "net", node_type, major_flow=MAJOR, minor_flow=MINOR, end=300.0, **crossing)
+    out = tmp_path / "o"
+    watch = Watch()
+    run, summary = _run(cfg, out, watch)
+    assert summary["controlled_vehicles"] >= 20
+    _no_incidents(run, out)
+    return cfg, run, watch
+
+
 @pytest.mark.parametrize("step", [1.0, 0.1])
 def test_a_priority_junction_the_minor_road_gives_way(tmp_path: Path, step: float) -> None:
     """Controlled vehicles on the minor road, random traffic on the major
@@ -163,12 +179,7 @@ def test_a_priority_junction_the_minor_road_gives_way(tmp_path: Path, step: floa
     and 19 against 25 and 35 at 1 s and 0.1 s steps): they wait for a gap
     they can cross at their preferred 1 m/s^2 (5 s from standstill, SUMO's
     drivers take 3 s at 2.6 m/s^2)."""
-    cfg = _crossing(tmp_path / "net", "priority", step=step, major_flow=MAJOR, minor_flow=MINOR, end=300.0)
-    out = tmp_path / "o"
-    watch = Watch()
-    run, summary = _run(cfg, out, watch)
-    assert summary["controlled_vehicles"] >= 20
-    _no_incidents(run, out)
+    cfg, _, watch = _safe_run(tmp_path, "priority", step=step)
     plain = _plain(cfg, tmp_path / "p")
     assert _crossed(watch) >= 0.4 * _crossed(plain)
     if step < 0.5:
@@ -187,22 +198,12 @@ def test_right_before_left_the_vehicle_from_the_right_goes_first(tmp_path: Path)
     background ones (from the west) on their left, so they have the right of
     way (SUMO's right-of-way matrix says who prohibits whom); no collision,
     and they get across as SUMO's drivers do."""
-    cfg = _crossing(tmp_path / "net", "right_before_left", major_flow=MAJOR, minor_flow=MINOR, end=300.0)
-    out = tmp_path / "o"
-    watch = Watch()
-    run, summary = _run(cfg, out, watch)
-    assert summary["controlled_vehicles"] >= 20
-    _no_incidents(run, out)
+    cfg, _, watch = _safe_run(tmp_path, "right_before_left")
     assert _crossed(watch) >= 0.9 * _crossed(_plain(cfg, tmp_path / "p"))
 
 
 def test_an_all_way_stop_halts_every_controlled_vehicle_before_it_enters(tmp_path: Path) -> None:
-    cfg = _crossing(tmp_path / "net", "allway_stop", major_flow=MAJOR, minor_flow=MINOR, end=300.0)
-    out = tmp_path / "o"
-    watch = Watch()
-    run, summary = _run(cfg, out, watch)
-    assert summary["controlled_vehicles"] >= 20
-    _no_incidents(run, out)
+    cfg, run, watch = _safe_run(tmp_path, "allway_stop")
     ctl = _controlled(run)
     entered = [vid for vid in ctl if any(lane.startswith(":C") for _, lane, _, _ in watch.rows.get(vid, []))]
     # First come, first served: about as many get across as under SUMO's

@@ -65,12 +65,15 @@ def _watch_departures(run: SumoRun) -> tuple[dict[str, float], dict[str, float]]
     return departed, arrived
 
 
+def _shipped_run(factory: pytest.TempPathFactory, name: str, **options: Any) -> tuple[Path, sumo.RunResult]:
+    """A shipped scenario run once for a module's tests: its output folder and result."""
+    out = factory.mktemp(name)
+    return out, sumo.run_scenario(sumo.resolve_scenario(name), RunOptions(progress=False, **options), out)
+
+
 @pytest.fixture(scope="module")
 def rural(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, sumo.RunResult]:
-    out = tmp_path_factory.mktemp("rural")
-    sc = sumo.resolve_scenario("rural_loop")
-    result = sumo.run_scenario(sc, RunOptions(end_s=300, fcd=True, progress=False), out)
-    return out, result
+    return _shipped_run(tmp_path_factory, "rural_loop", end_s=300, fcd=True)
 
 
 def test_rural_loop_tracks_lanes_within_comfort(rural: tuple[Path, sumo.RunResult]) -> None:
@@ -185,10 +188,7 @@ def test_axle_errors_are_reported_at_fixed_points(tmp_path: Path) -> None:
 
 @pytest.fixture(scope="module")
 def grid(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, sumo.RunResult]:
-    out = tmp_path_factory.mktemp("grid")
-    sc = sumo.resolve_scenario("urban_grid")
-    result = sumo.run_scenario(sc, RunOptions(end_s=300, trace=True, progress=False), out)
-    return out, result
+    return _shipped_run(tmp_path_factory, "urban_grid", end_s=300, trace=True)
 
 
 def test_grid_stops_for_red_lights_and_follows_leaders(grid: tuple[Path, sumo.RunResult]) -> None:
