@@ -52,14 +52,6 @@ JUMP_M = 5.0
 ROUTE_INDEX_SLACK_M = 10.0
 
 
-def lane_position(geo: Any, s: float) -> tuple[str, float]:
-    """SUMO's (lane, lane position) of arc length ``s`` on a track (its
-    ``RouteGeometry``)."""
-    k = max(int(np.searchsorted(geo.piece_start_s, s, side="right")) - 1, 0)
-    pos = float(geo.piece_lane_pos[k] + (s - geo.piece_start_s[k]) * geo.piece_scale[k])
-    return geo.piece_lane[k], min(max(pos, 0.0), float(geo.piece_lane_length[k]))
-
-
 def repair(vehicle: Any, vid: str, lane: str, pos: float, index: int, ok: set[int]) -> bool:
     """Puts ``vid`` (``vehicle``: SUMO's vehicle domain) on ``lane`` at
     ``pos`` with SUMO's route index ``index`` (any of ``ok`` will do), with
@@ -76,13 +68,6 @@ def repair(vehicle: Any, vid: str, lane: str, pos: float, index: int, ok: set[in
         # An earlier occurrence of the edge: one edge on, then look again.
         vehicle.moveTo(vid, f"{route[at + 1]}_0", 0.0)
     return False
-
-
-def route_indices_near(piece_start_s: np.ndarray, piece_occurrence: list[int], base: int, s: float) -> set[int]:
-    """SUMO's route indices of the pieces within ``ROUTE_INDEX_SLACK_M`` of
-    arc length ``s`` on a track whose first edge is route index ``base``."""
-    lo, hi = np.searchsorted(piece_start_s, [s - ROUTE_INDEX_SLACK_M, s + ROUTE_INDEX_SLACK_M], side="right")
-    return {base + piece_occurrence[k] for k in range(max(int(lo) - 1, 0), max(int(hi), 1))}
 
 
 class PlacementCheck:

@@ -60,7 +60,7 @@ import numpy as np
 import blendtrack
 from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection, loads_ok_marker, sumo_binary
-from blendtrack.sumo.faults import PlacementCheck, lane_position, repair, route_indices_near
+from blendtrack.sumo.faults import ROUTE_INDEX_SLACK_M, PlacementCheck, repair
 from blendtrack.sumo.incidents import Incidents
 from blendtrack.sumo.junctions import YIELD_LOOKAHEAD_M, Junctions
 from blendtrack.sumo.lanechange import LANE_CHANGE_ROOM_M, LaneChanges
@@ -129,7 +129,7 @@ class SumoRun:
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel,
                                    float(base_config.preferred_acceleration))
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel)
-        self.stops = Stops(self.conn, self.fleet, self.network)
+        self.stops = Stops(self.conn, self.fleet, self.network, self.tracks.lanes)
         obs_decel = base_config.max_obs_deceleration if "max_obs_deceleration" in options.fixed_keys else base_config.max_deceleration
         self.sumo_leaders = SumoLeaders(self.conn, self.active, max(abs(float(obs_decel)), 0.5))
         self.zippers = Zippers(self.conn, self.network, self.tracks, self.active)
@@ -531,14 +531,15 @@ class SumoRun:
     def _route_indices(self, vid: str) -> set[int]:
         """SUMO's route indices that agree with where blendtrack has ``vid``."""
         act = self.active[vid]
-        return route_indices_near(act.geo.piece_start_s, act.geo.piece_occurrence, act.route_base, self.fleet.s_front(act.slot))
+        return {act.route_base + k for k in self.fleet.occurrences_near_front(act.slot, ROUTE_INDEX_SLACK_M)}
 
     def _repair_route_index(self, vid: str) -> bool:
         """SUMO has ``vid`` on another occurrence of its edge: put it on
         blendtrack's lane and position with ``moveTo`` (see
         :mod:`~blendtrack.sumo.faults`); True when SUMO's index is right then."""
         act = self.active[vid]
-        lane, pos = lane_position(act.geo, self.fleet.s_front(act.slot))
+        lane_id, pos = self.fleet.front_lane_position(act.slot)
+        lane = self.tracks.lanes.names[lane_id]
         index = act.route_base + self.fleet.occurrence(act.slot)
         try:
             repaired = repair(self.conn.sumo.vehicle, vid, lane, pos, index, self._route_indices(vid))

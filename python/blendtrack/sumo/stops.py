@@ -55,7 +55,7 @@ from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.geometry import RouteGeometry
 from blendtrack.sumo.network import Network
-from blendtrack.sumo.tracks import Active
+from blendtrack.sumo.tracks import Active, Interned
 
 #: The halt is placed this far (m) before the stop's end position: the
 #: stopping law's last creep carries the front 0.155 to 0.207 m past its
@@ -83,26 +83,11 @@ def stop_key(st: Any) -> tuple[str, float, str]:
     return (st.lane, round(float(st.endPos), 3), st.stoppingPlaceID)
 
 
-def halt_on_track(geo: RouteGeometry, lane: str, end_pos: float, lane_length: float, s_from: float) -> float | None:
-    """The arc length on ``geo``'s track where the front halts for a stop at
-    ``end_pos`` on ``lane`` (``AIM_SHORT_M`` short of it, at least
-    ``LANE_END_ROOM_M`` before the lane's end): on the first piece of that
-    lane covering the position at or after ``s_from``; None where none does."""
-    pos = min(end_pos, lane_length - LANE_END_ROOM_M) - AIM_SHORT_M
-    starts = geo.piece_start_s
-    n = len(starts)
-    for k in range(n):
-        if geo.piece_lane[k] != lane:
-            continue
-        start = float(starts[k])
-        end = float(starts[k + 1]) if k + 1 < n else float(geo.length_m)
-        lp0, scale = float(geo.piece_lane_pos[k]), float(geo.piece_scale[k])
-        lp1 = lp0 + (end - start) * scale
-        if lp0 - 1e-6 <= pos <= lp1 + 1e-6:
-            s = start + (pos - lp0) / scale
-            if s >= s_from:
-                return s
-    return None
+def halt_position(end_pos: float, lane_length: float) -> float:
+    """The lane position where the front halts for a stop ending at
+    ``end_pos`` on a lane ``lane_length`` long: ``AIM_SHORT_M`` short of it,
+    at least ``LANE_END_ROOM_M`` before the lane's end."""
+    return min(end_pos, lane_length - LANE_END_ROOM_M) - AIM_SHORT_M
 
 
 @dataclass
@@ -122,10 +107,12 @@ class _Pending:
 class Stops:
     """The stops of the controlled vehicles that have any."""
 
-    def __init__(self, conn: SumoConnection, fleet: RouteFleet, network: Network) -> None:
+    def __init__(self, conn: SumoConnection, fleet: RouteFleet, network: Network, lanes: Interned) -> None:
         self.conn = conn
         self.fleet = fleet
         self.network = network
+        #: The lane ids of the RouteFleet's tracks.
+        self.lanes = lanes
         #: vid -> its next stop, for the vehicles with stops left.
         self.pending: dict[str, _Pending] = {}
         self.counts = {"stops_served": 0, "stops_skipped": 0}
@@ -210,11 +197,14 @@ class Stops:
         """The halt for SUMO's next stop ``st`` on the vehicle's present track."""
         slot = p.act.slot
         sf = self.fleet.s_front(slot)
-        length = float(self.network.net().getLane(st.lane).getLength())
-        s = halt_on_track(p.act.geo, st.lane, float(st.endPos), length, sf - PASSED_M)
+        pos = halt_position(float(st.endPos), float(self.network.net().getLane(st.lane).getLength()))
+        # On the first piece of the stop's lane covering the position, ahead
+        # of the front (a lane the track drives twice: the next time).
+        lane = self.lanes.get(st.lane, -1)
+        s = self.fleet.arc_at_lane_position(slot, lane, pos, sf - PASSED_M)
         if s is None:
             # Off the track ahead, or behind the front.
-            behind = halt_on_track(p.act.geo, st.lane, float(st.endPos), length, -math.inf)
+            behind = self.fleet.arc_at_lane_position(slot, lane, pos, -math.inf)
             self._skip(vid, p, "passed" if behind is not None else "off_track")
             return
         self.fleet.set_halt(slot, s)

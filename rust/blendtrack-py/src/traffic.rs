@@ -359,6 +359,40 @@ impl RouteFleet {
         self.inner.occurrence(slot).map_err(traffic_error)
     }
 
+    /// The simulator's (lane id, lane position) of the vehicle's front where
+    /// blendtrack has it: on the piece of its track holding the front, the
+    /// position clamped to the lane.
+    fn front_lane_position(&self, slot: i64) -> PyResult<(u32, f64)> {
+        self.inner.front_lane_position(slot).map_err(traffic_error)
+    }
+
+    /// The occurrences (see `occurrence`) of the pieces of the vehicle's
+    /// track within `slack_m` of its front, in track order.
+    fn occurrences_near_front(&self, slot: i64, slack_m: f64) -> PyResult<Vec<u32>> {
+        self.inner
+            .occurrences_near_front(slot, slack_m)
+            .map_err(traffic_error)
+    }
+
+    /// The arc length on the vehicle's track of lane position `pos_m` on
+    /// lane `lane` (an id of `add_route`'s `piece_lane`): on the first piece
+    /// of that lane covering the position at or after `s_from_m`; None where
+    /// none does.
+    fn arc_at_lane_position(
+        &self,
+        slot: i64,
+        lane: i64,
+        pos_m: f64,
+        s_from_m: f64,
+    ) -> PyResult<Option<f64>> {
+        let Ok(lane) = u32::try_from(lane) else {
+            return Ok(None);
+        };
+        self.inner
+            .arc_at_lane_position(slot, lane, pos_m, s_from_m)
+            .map_err(traffic_error)
+    }
+
     /// Removes a track no vehicle drives any more (its memory is freed; a
     /// later add_route may reuse the id). One still driven raises InputError naming a slot.
     fn remove_route(&mut self, track_id: i64) -> PyResult<()> {

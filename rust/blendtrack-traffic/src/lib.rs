@@ -472,6 +472,36 @@ impl RouteFleet {
         let d = self.driven(slot)?;
         Ok(d.route.occurrence_at(d.s_front_m))
     }
+    /// The simulator's lane and lane position of the vehicle's front, where
+    /// blendtrack has it (see [`Route::lane_position`]).
+    pub fn front_lane_position(&self, slot: i64) -> Result<(u32, f64), TrafficError> {
+        let d = self.driven(slot)?;
+        Ok(d.route.lane_position(d.s_front_m))
+    }
+    /// The occurrences of the pieces of the vehicle's track within `slack_m`
+    /// of its front (see [`Route::occurrences_near`]).
+    pub fn occurrences_near_front(
+        &self,
+        slot: i64,
+        slack_m: f64,
+    ) -> Result<Vec<u32>, TrafficError> {
+        let d = self.driven(slot)?;
+        Ok(d.route.occurrences_near(d.s_front_m, slack_m).collect())
+    }
+    /// The arc length on the vehicle's track of lane position `pos` on lane
+    /// `lane`, at or after `s_from` (see [`Route::arc_at_lane_position`]).
+    pub fn arc_at_lane_position(
+        &self,
+        slot: i64,
+        lane: u32,
+        pos: f64,
+        s_from: f64,
+    ) -> Result<Option<f64>, TrafficError> {
+        Ok(self
+            .driven(slot)?
+            .route
+            .arc_at_lane_position(lane, pos, s_from))
+    }
     /// The stop line ahead of the vehicle (the one its plan looked at).
     pub fn next_stop(&self, slot: i64) -> Result<Option<StopLine>, TrafficError> {
         let d = self.driven(slot)?;

@@ -204,6 +204,43 @@ impl Route {
             .saturating_sub(1)
     }
 
+    /// The simulator's lane and lane position of arc length `s`: on the
+    /// piece holding `s`, the position clamped to the lane.
+    pub fn lane_position(&self, s: f64) -> (u32, f64) {
+        let p = &self.pieces[self.piece_at(s)];
+        let pos = p.lane_pos_start_m + (s - p.start_m) * p.scale;
+        (p.lane, pos.max(0.0).min(p.lane_length_m))
+    }
+
+    /// The arc length of lane position `pos` on lane `lane`: on the first
+    /// piece of that lane covering the position (within a micrometre) whose
+    /// arc length is at or after `s_from`; None where none does (the lane
+    /// is not on the track, or only behind `s_from`).
+    pub fn arc_at_lane_position(&self, lane: u32, pos: f64, s_from: f64) -> Option<f64> {
+        const TOL_M: f64 = 1e-6;
+        self.pieces.iter().enumerate().find_map(|(k, p)| {
+            if p.lane != lane {
+                return None;
+            }
+            let end = self.pieces.get(k + 1).map_or(self.length_m, |q| q.start_m);
+            let last = p.lane_pos_start_m + (end - p.start_m) * p.scale;
+            let on = p.lane_pos_start_m - TOL_M <= pos && pos <= last + TOL_M;
+            let s = p.start_m + (pos - p.lane_pos_start_m) / p.scale;
+            (on && s >= s_from).then_some(s)
+        })
+    }
+
+    /// The occurrences of the pieces within `slack_m` of arc length `s`
+    /// (the piece holding `s - slack_m` to the one holding `s + slack_m`),
+    /// in track order, repeats kept.
+    pub fn occurrences_near(&self, s: f64, slack_m: f64) -> impl Iterator<Item = u32> + '_ {
+        let lo = self.pieces.partition_point(|p| p.start_m <= s - slack_m);
+        let hi = self.pieces.partition_point(|p| p.start_m <= s + slack_m);
+        self.pieces[lo.saturating_sub(1)..hi.max(1)]
+            .iter()
+            .map(|p| p.occurrence)
+    }
+
     pub fn pieces(&self) -> &[Piece] {
         &self.pieces
     }
@@ -277,6 +314,51 @@ mod tests {
             e.to_string().contains("piece 2 has occurrence 0 after 1"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn lane_positions_and_arc_lengths_map_both_ways_on_each_lap() {
+        // Three laps of one lane (id 20), each lap from lane position 2 m
+        // at 0.5 m of lane a metre of track: lane position x on lap k is arc
+        // length k * lap + (x - 2) / 0.5, and back.
+        let (path, laps) = laps();
+        let lap = path.length() / 3.0;
+        let pieces = laps
+            .pieces
+            .iter()
+            .map(|p| Piece {
+                lane_pos_start_m: 2.0,
+                scale: 0.5,
+                ..*p
+            })
+            .collect();
+        let route = Route::new(pieces, vec![], path.length(), None).unwrap();
+        assert_eq!(route.lane_position(lap + 4.0), (20, 2.0 + 4.0 * 0.5));
+        // Clamped to the lane: before the track's start, past its end.
+        assert_eq!(route.lane_position(-5.0), (20, 0.0));
+        assert_eq!(route.lane_position(1e9), (20, lap));
+        let x = 7.5;
+        for k in 0..3 {
+            let want = k as f64 * lap + (x - 2.0) / 0.5;
+            let s = route.arc_at_lane_position(20, x, want - 1.0).unwrap();
+            assert!((s - want).abs() < 1e-9, "lap {k}: {s} against {want}");
+            let (lane, at) = route.lane_position(s);
+            assert!(lane == 20 && (at - x).abs() < 1e-9);
+        }
+        let first = route.arc_at_lane_position(20, x, f64::NEG_INFINITY);
+        assert_eq!(first, Some((x - 2.0) / 0.5));
+        // Only behind s_from, another lane, or a position no lap covers.
+        assert_eq!(route.arc_at_lane_position(20, x, 2.0 * lap + 12.0), None);
+        assert_eq!(route.arc_at_lane_position(21, x, f64::NEG_INFINITY), None);
+        assert_eq!(route.arc_at_lane_position(20, 1.0, f64::NEG_INFINITY), None);
+        // The pieces within 1 m of a lap's start: the end of the lap before
+        // and the start of this one; mid-lap, that lap's alone.
+        assert_eq!(route.occurrences_near(lap, 1.0).collect::<Vec<_>>(), [0, 1]);
+        assert_eq!(
+            route.occurrences_near(1.5 * lap, 1.0).collect::<Vec<_>>(),
+            [1]
+        );
+        assert_eq!(route.occurrences_near(-9.0, 1.0).collect::<Vec<_>>(), [0]);
     }
 
     #[test]
