@@ -543,3 +543,55 @@ def test_junction_blocked_by_a_body_within_the_half_width() -> None:
     network.junction_lanes = lambda via: (path, [])
     v.cars["o"]["xy"] = (10.0, 0.0)
     assert not j.junction_blocked("me", "in_0")
+
+
+# ------------------------------------------------------------ zipper merges
+def _zippers(conn: FakeConn, fronts: dict[str, tuple[int, float]]) -> Any:
+    """``Zippers`` on a merge of lanes A_0 and B_0 (40 m each), each into a
+    35 m junction lane (:J_0_0 from A, :J_1_0 from B) that meet at its end;
+    ``fronts``: controlled vehicle -> (slot, blendtrack's front on its track,
+    which starts where its lane starts; the stop line at 40 m)."""
+    from blendtrack.sumo.tracks import Active
+    from blendtrack.sumo.zipper import Zippers
+
+    vias = [":J_0_0", ":J_1_0"]
+    slots = {slot: (vid, s) for vid, (slot, s) in fronts.items()}
+    fleet = SimpleNamespace(
+        next_stop=lambda slot: (40.0, -1, 0, False, 0 if conn.vehicle.cars[slots[slot][0]]["lane"] == "A_0" else 1, 75.0),
+        s_front=lambda slot: slots[slot][1])
+    conn.get_lane_id = lambda vid: conn.vehicle.cars[vid]["lane"]  # type: ignore[attr-defined]
+    conn.get_lane_pos = lambda vid: conn.vehicle.cars[vid]["pos"]  # type: ignore[attr-defined]
+    net = FakeNet({"A_0": FakeLane(40.0), "B_0": FakeLane(40.0)})
+    z = Zippers(conn, SimpleNamespace(net=lambda: net),  # type: ignore[arg-type]
+                SimpleNamespace(fleet=fleet, lanes=SimpleNamespace(name=lambda i: vias[i])), {})  # type: ignore[arg-type]
+    # Each stream's foes come along the other's lane, 35 m from its end to the merge point.
+    z._zips = {":J_0_0": (35.0, [("B_0", 35.0)]), ":J_1_0": (35.0, [("A_0", 35.0)])}
+    return [Active(vid, slot, None, "", None) for vid, (slot, _) in fronts.items()], z  # type: ignore[arg-type]
+
+
+def test_zipper_orders_two_controlled_vehicles_by_one_measure() -> None:
+    """Two controlled vehicles near a zipper: A's front is 5.0 m along its
+    lane by its track (SUMO has 5.6 m), B's 5.2 m (SUMO 5.4 m). By their
+    tracks B is closer to the merge point (75 - 5.2 = 69.8 m against
+    70.0 m): A falls in behind B (gap 70.0 - 69.8 - 5 m length - 2.5 m
+    minGap, less than 0: 0), B has nobody to follow. Measured each by its
+    own track against the other's SUMO position, each found the other
+    closer (A: 75 - 5.4 < 70.0; B: 75 - 5.6 < 69.8) and both waited for good
+    (traced on Eccles)."""
+    conn = FakeConn()
+    conn.vehicle.add("A", lane="A_0", pos=5.6)
+    conn.vehicle.add("B", lane="B_0", pos=5.4)
+    conn.lanes = {"A_0": ["A"], "B_0": ["B"]}
+    order, z = _zippers(conn, {"A": (0, 5.0), "B": (1, 5.2)})
+    assert z.leaders(order) == [("A", ("B", 0.0))]
+    # A vehicle SUMO drives is placed by SUMO's position: C, 4 m along B_0
+    # (71 m from the merge point), is behind A (70 m): nobody follows C, and
+    # C is not closer than B for A.
+    conn.vehicle.add("C", lane="B_0", pos=4.0)
+    conn.lanes["B_0"] = ["C", "B"]
+    assert z.leaders(order) == [("A", ("B", 0.0))]
+    # 12 m along B_0 (63 m from the merge point), C is ahead of both, and the
+    # nearest ahead of A in the order is still B.
+    conn.vehicle.cars["C"]["pos"] = 12.0
+    conn.lanes["B_0"] = ["B", "C"]
+    assert z.leaders(order) == [("A", ("B", 0.0))]
