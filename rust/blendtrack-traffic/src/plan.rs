@@ -209,6 +209,10 @@ impl RouteFleet {
     }
 }
 
+/// A leader slower than this (m/s; SUMO's halting speed) stands: it can
+/// block the far side of a junction.
+const LEADER_STANDING_MPS: f64 = 0.1;
+
 /// What a vehicle does at the stop line it approaches.
 #[derive(Debug, Clone, Copy)]
 struct StopDecision {
@@ -279,10 +283,17 @@ fn decide_stop(
             };
             let near = gap < reach;
             let held = d.holding == Some(next);
-            // Where the leader's back would stop if it braked now at 4 m/s^2.
+            // A standing leader (below SUMO's halting speed) whose back
+            // leaves no room for the vehicle beyond the junction's exit. A
+            // moving leader makes room as it goes: it is followed into the
+            // junction, as SUMO's drivers do (they count the space up to
+            // the last standing vehicle beyond the link). Traced on
+            // Bologna: held until a leader pulling away at 1 m/s^2 was a
+            // body length past the exit, a queue crossed a green light one
+            // vehicle every 9 s, each stopping at the line.
             let blocked = lg.is_finite()
-                && sf + lg + margin + lv * lv / 8.0 - stop.exit_m
-                    < d.body.length_m + d.body.min_gap_m + margin;
+                && lv < LEADER_STANDING_MPS
+                && sf + lg + margin - stop.exit_m < d.body.length_m + d.body.min_gap_m + margin;
             if near && blocked && (held || can_stop(cfg, v, gap)) {
                 // Keep the junction clear: no room behind the
                 // leader on the far side, so wait at the line.
@@ -548,6 +559,40 @@ mod tests {
             sf < 200.0,
             "waits before the line, not inside the junction: front {sf}"
         );
+    }
+
+    #[test]
+    fn a_leader_pulling_away_beyond_the_junction_is_followed_through_it() {
+        // The leader's back starts 1 m past the exit and creeps away at
+        // 0.3 m/s: in the 20 s it never leaves the room a standing vehicle
+        // needs (body 4.5 + minGap 2.5 + margin 1 m past the exit), yet it
+        // moves, so the vehicle is not held at the line: it follows
+        // through the junction, never closer than the standstill margin.
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        f.set_signal(0, &[Signal::Priority]).unwrap();
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(180.0, 3.0))
+            .unwrap() as i64;
+        let mut closest = f64::INFINITY;
+        for k in 0..200 {
+            let back = 211.0 + 0.3 * k as f64 * DT;
+            let gap = back - f.s_front(slot).unwrap();
+            closest = closest.min(gap);
+            f.plan(&Observations {
+                slots: &[slot],
+                leader_gap_m: &[gap],
+                leader_slot: &[-1],
+                leader_speed_mps: &[0.3],
+                lane: &[-1],
+                lane_pos_m: &[f64::NAN],
+                soft: None,
+            })
+            .unwrap();
+            f.step(&[], DT).unwrap();
+        }
+        let sf = f.s_front(slot).unwrap();
+        assert!(sf > 204.0, "followed into the junction: front {sf}");
+        assert!(closest > 0.5, "kept its distance: closest gap {closest}");
     }
 
     #[test]
