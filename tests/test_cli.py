@@ -53,7 +53,10 @@ def test_sim_on_a_builtin_track(tmp_path: Path) -> None:
     assert r.returncode == 0, r.stderr
     m = _check_outputs(out)
     assert m["lateral_error_max_abs_m"] >= 1.9  # the 2 m start is in the run
-    assert m["lateral_error_mean_abs_m_settled"] < 0.1
+    # Settled for good within the run: |e| below SETTLING_THRESHOLD_M (0.1 m)
+    # from the settling time on, so its mean after settling too (a run that
+    # never settles has NaN there and fails).
+    assert math.isfinite(m["settling_time_s"]) and m["lateral_error_mean_abs_m_settled"] < 0.1
     rows = (out / "timeseries.csv").read_text().count("\n") - 1
     assert rows == 6000
 
@@ -73,7 +76,8 @@ def test_sim_backward_stanley_on_a_circle_with_a_config_file(tmp_path: Path) -> 
     dx, dy = float(b["x_m"]) - float(a["x_m"]), float(b["y_m"]) - float(a["y_m"])
     th = float(b["theta_rad"])
     assert dx * math.cos(th) + dy * math.sin(th) < -0.9 * math.hypot(dx, dy)
-    # And it tracks the circle it was put 1 m off.
+    # And it tracks the circle it was put 1 m off: at the end within the
+    # metrics' settling threshold (SETTLING_THRESHOLD_M, 0.1 m) of it.
     assert abs(float(rows[-1]["lateral_error_m"])) < 0.1
 
 

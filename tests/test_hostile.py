@@ -203,7 +203,10 @@ def test_a_vehicle_starting_on_the_virtual_border_recovers(tmp_path: Path, capsy
     assert rc == 0, err
     m = json.loads((out / "metrics.json").read_text())
     assert m["distance_m"] > 50.0
-    assert m["lateral_error_mean_abs_m"] < 2.0
+    # Recovered: settled for good within the 30 s (|e| below the metrics'
+    # 0.1 m settling threshold from then on; a vehicle that stays on the
+    # border, 6 m off, never settles and has NaN here).
+    assert math.isfinite(m["settling_time_s"]) and m["settling_time_s"] < 30.0, m["settling_time_s"]
 
 
 @pytest.mark.parametrize("offset", [6.0, -6.0, 6.0 - 1e-12, -6.0 + 1e-12])
@@ -211,7 +214,10 @@ def test_api_runs_starting_on_either_border_drive_back(offset: float) -> None:
     path = blendtrack.Path.circle(50.0)
     frame, m = blendtrack.simulate(path, blendtrack.ControllerConfig(), offset_m=offset, duration_s=30.0)
     assert m["distance_m"] > 50.0
-    assert abs(frame["lateral_error_m"].iloc[-1]) < 0.5
+    # Back on the path: settled for good within the run, so the last sample
+    # is within the metrics' 0.1 m settling threshold.
+    assert math.isfinite(m["settling_time_s"]), m["settling_time_s"]
+    assert abs(frame["lateral_error_m"].iloc[-1]) < 0.1
 
 
 def test_laps_run_to_the_lap_under_the_step_limit(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -158,7 +158,9 @@ def test_moving_control_point_and_callable_alpha_agree(loop: blendtrack.Path) ->
     b, mb = blendtrack.simulate(loop, alpha=lambda t: 0.5 * (math.sin(0.2 * t) + 1.0), offset_m=1.0, duration_s=40.0)
     assert a["alpha"].min() < 0.1 and a["alpha"].max() > 0.9
     np.testing.assert_allclose(a["lateral_error_m"], b["lateral_error_m"], atol=1e-6)
-    assert ma["lateral_error_max_abs_m_settled"] < 0.1
+    # Settled for good within the 40 s (a NaN settling time fails); after
+    # that |e| < SETTLING_THRESHOLD_M (0.1 m) by the metric's definition.
+    assert math.isfinite(ma["settling_time_s"]) and ma["lateral_error_max_abs_m_settled"] < 0.1
 
 
 def test_noise_is_reproducible_and_seeded(loop: blendtrack.Path) -> None:

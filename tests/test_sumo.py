@@ -200,11 +200,22 @@ def test_grid_stops_for_red_lights_and_follows_leaders(grid: tuple[Path, sumo.Ru
     assert result.summary["red_light_violations"] == 0
     assert result.summary["placement_faults"] == 0
     assert all(int(r["red_light_violations"]) == 0 for r in rows)
-    # Controlled vehicles really met red lights: some of them stood still.
+    # Controlled vehicles really met red lights and stood still. A closed
+    # form from the scenario's files: every light runs the same 90 s cycle
+    # from offset 0 (urban_grid.tll.xml), each approach red for 45 s of it;
+    # the 14 auto flows all depart at 3 + 60 k s, so a flow's vehicles of
+    # 3, 63 and 123 s reach their first light (the same drive each, in free
+    # flow) at three phases 30 s apart. A 45 s red holds the 30 s from 7.5 s
+    # after it starts to 7.5 s before it ends, and one of three phases 30 s
+    # apart falls in any 30 s: per flow at least one of them arrives with
+    # 7.5 s of red behind and ahead of it, time to brake from 13.9 m/s to a
+    # standstill. So at least one standing vehicle per auto flow.
     with open(out / "trace.csv") as f:
         trace = list(csv.DictReader(f))
     stopped = {r["id"] for r in trace if float(r["v_mps"]) < 0.1}
-    assert len(stopped) >= 10, len(stopped)
+    (rou,) = (SCENARIOS / "urban_grid").glob("*.rou.xml")
+    auto_flows = [f for f in ET.parse(rou).getroot().iter("flow") if f.get("type") == "auto"]
+    assert len(stopped) >= len(auto_flows) == 14, (len(stopped), len(auto_flows))
     # No controlled vehicle ran into the vehicle ahead of it on its lane.
     controlled = {r["id"] for r in rows}
     rear_ends = [c for c in _collisions(out) if c["type"] == "collision" and c["collider"] in controlled]
@@ -278,11 +289,21 @@ def test_grid_waits_for_a_vehicle_standing_inside_the_junction(tmp_path: Path) -
     two more hit it later). They now wait at the line while a vehicle
     inside the junction is within their path's half width."""
     sc = sumo.resolve_scenario("urban_grid")
-    result = sumo.run_scenario(sc, RunOptions(end_s=420, seed=2, alpha=0.8, progress=False), tmp_path)
+    run = SumoRun(sc, RunOptions(end_s=420, seed=2, alpha=0.8, progress=False), tmp_path)
+    _, arrived = _watch_departures(run)
+    result = run.run()
     assert result.summary["inside_junction_waits"] > 0, "the check fired"
     assert _collisions(tmp_path) == []
     assert result.summary["red_light_violations"] == 0
-    assert sum(r.reason == "arrived" for r in result.records) > 50, "traffic flows"
+    # Traffic flows (no gridlock, as in the test with every vehicle
+    # controlled): over the last 100 s at least half the inflow the flows
+    # schedule then leaves (SUMO's own arrivals); the controlled vehicles'
+    # "arrived" records are SUMO's arrivals of them.
+    inflow = _scheduled("urban_grid", 420.0) - _scheduled("urban_grid", 320.0)
+    late = sum(1 for t in arrived.values() if t > 320.0)
+    assert late >= 0.5 * inflow, (late, inflow)
+    controlled = {r.vid for r in result.records}
+    assert sum(r.reason == "arrived" for r in result.records) == len(controlled & set(arrived)) > 0
 
 
 def test_left_turners_look_far_enough_for_oncoming_traffic(tmp_path: Path) -> None:
@@ -558,9 +579,15 @@ def test_tactical_lane_changes_are_made_on_request_without_collision(tmp_path: P
     assert r.returncode == 0, r.stderr
     on = json.loads((tmp_path / "on" / "summary.json").read_text())
     assert on["tactical_lane_changes_enabled"] is True
-    assert on["tactical_lane_changes"] >= 10, on["tactical_lane_changes"]
+    # How often SUMO's model wants a speed-gain or keep-right change has no
+    # closed form: at least one was made. The changes the route needs come
+    # on top: every ramp vehicle that arrived (SUMO's tripinfo) left the
+    # acceleration lane, which has no successor, by a change of its own.
+    assert on["tactical_lane_changes"] >= 1, on["tactical_lane_changes"]
+    trips = ET.parse(tmp_path / "on" / "sumo" / "tripinfo.xml").getroot().iter("tripinfo")
+    merged = sum(1 for t in trips if "_ramp." in t.get("id", "") and float(t.get("arrival", "-1")) >= 0)
     changes = sum(int(row["lane_changes"]) for row in _read_vehicles(tmp_path / "on"))
-    assert changes >= on["tactical_lane_changes"], changes
+    assert merged > 0 and changes >= on["tactical_lane_changes"] + merged, (changes, on["tactical_lane_changes"], merged)
     assert on["collisions"] == 0 and _collisions(tmp_path / "on") == []
     sc = sumo.resolve_scenario("highway_onramp")
     off = sumo.run_scenario(sc, RunOptions(controlled_fraction=1.0, end_s=60, progress=False), tmp_path / "off")
@@ -575,16 +602,23 @@ def test_lane_change_tracks_go_once_their_vehicle_leaves_them(tmp_path: Path) ->
     sc = sumo.resolve_scenario("highway_onramp")
     run = SumoRun(sc, RunOptions(controlled_fraction=1.0, end_s=200, tactical_lane_changes=True, progress=False), tmp_path)
     mismatches: list[tuple[float, int, int]] = []
+    merged: set[str] = set()  # ramp vehicles SUMO has past the merge
 
     def count(r: SumoRun, t: float) -> None:
         expected = len(r.tracks.geo_cache) + sum(1 for a in r.active.values() if a.own_track is not None)
         if r.fleet.n_tracks != expected:
             mismatches.append((t, r.fleet.n_tracks, expected))
+        present = set(r.sumo.vehicle.getIDList())
+        merged.update(v for v in r.active if "_ramp." in v and v in present and r.sumo.vehicle.getRoadID(v) in ("hw_down", "hw_out"))
 
     run.step_hooks.append(count)
     result = run.run()
+    # Each ramp vehicle past the merge left the acceleration lane (no
+    # successor) by a change of its own; tactical changes (not needed by the
+    # route) come on top. Each change builds a track: that many at least.
     changes = sum(r.lane_changes for r in result.records)
-    assert changes >= 30, changes
+    tactical = result.summary["tactical_lane_changes"]
+    assert len(merged) > 0 and tactical >= 1 and changes >= len(merged) + tactical, (changes, len(merged), tactical)
     assert mismatches[:3] == [], mismatches[:3]
     assert run.fleet.n_tracks < len(run.tracks.geo_cache) + 10
 
@@ -598,7 +632,14 @@ def test_tactical_lane_changes_watch_the_lane_beyond_the_target(tmp_path: Path) 
     (t = 479 s)."""
     sc = sumo.resolve_scenario("highway_onramp")
     res = sumo.run_scenario(sc, RunOptions(end_s=600, tactical_lane_changes=True, progress=False), tmp_path)
-    assert res.summary["tactical_lane_changes"] >= 20, res.summary["tactical_lane_changes"]
+    # Tactical changes happened (their number has no closed form), on top of
+    # one per controlled ramp vehicle that arrived (SUMO's tripinfo: it left
+    # the acceleration lane, which has no successor).
+    tactical = res.summary["tactical_lane_changes"]
+    trips = ET.parse(tmp_path / "sumo" / "tripinfo.xml").getroot().iter("tripinfo")
+    merged = sum(1 for t in trips if t.get("id", "").startswith("auto_ramp.") and float(t.get("arrival", "-1")) >= 0)
+    changes = sum(r.lane_changes for r in res.records)
+    assert tactical >= 1 and merged > 0 and changes >= tactical + merged, (changes, tactical, merged)
     assert res.summary["collisions"] == 0 and _collisions(tmp_path) == []
 
 
@@ -615,11 +656,12 @@ def test_sumo_has_each_controlled_vehicle_where_blendtrack_has_it(tmp_path: Path
     run = SumoRun(sc, RunOptions(end_s=240, progress=False), tmp_path)
     # (distance, time, vehicle) along blendtrack's heading and across it.
     worst: list[tuple[float, float, str]] = [(0.0, 0.0, ""), (0.0, 0.0, "")]
-    checked = [0]
+    checked = [0, 0]  # compared, of the controlled vehicles SUMO has
 
     def compare(r: SumoRun, t: float) -> None:
         v = r.sumo.vehicle
         present = set(v.getIDList())
+        checked[1] += sum(1 for vid in r.active if vid in present)
         for vid, act in r.active.items():
             if vid not in present or v.getLaneID(vid).startswith(":") or act.changing is not None:
                 continue
@@ -635,7 +677,11 @@ def test_sumo_has_each_controlled_vehicle_where_blendtrack_has_it(tmp_path: Path
 
     run.step_hooks.append(compare)
     result = run.run()
-    assert checked[0] > 10_000
+    # Compared wherever the check applies: SUMO's internal (junction) lanes
+    # are at most 13 % of any of the grid's routes (from the network's
+    # lengths), lane changes a few seconds; left turners waiting inside a
+    # junction add some. At least half of the controlled vehicle-steps.
+    assert checked[1] > 0 and checked[0] >= 0.5 * checked[1], checked
     # Along the lane SUMO's movement lands the front where blendtrack has it
     # (a speed within 0.1 m/s + 2 % of the vehicle's makes up any rest);
     # across, a lane move puts it on the centreline: the control point within
@@ -655,9 +701,10 @@ def test_leaders_read_off_lane_lists_are_the_ones_sumo_gives(tmp_path: Path) -> 
     sc = sumo.resolve_scenario("highway_onramp")
     opts = RunOptions(controlled_fraction=1.0, end_s=150, progress=False, sumo_args=("--scale", "2"))
     run = SumoRun(sc, opts, tmp_path)
-    compared = [0, 0]  # vehicles compared, of which read off a lane list
+    compared = [0, 0, 0]  # vehicles compared, of which read off a lane list; SUMO's vehicle-steps
 
     def compare(r: SumoRun, t: float) -> None:
+        compared[2] += r.sumo.vehicle.getIDCount()
         if not r.active:
             return
         r.vehicles.refresh_order()
@@ -679,7 +726,15 @@ def test_leaders_read_off_lane_lists_are_the_ones_sumo_gives(tmp_path: Path) -> 
 
     run.step_hooks.append(compare)
     run.run()
-    assert compared[0] > 20_000 and compared[1] > 0.5 * compared[0], compared
+    # Every vehicle is controlled; a step is skipped only while an arrival is
+    # pending, and none arrives before 3915 m at 33 m/s (119 s of 150): at
+    # least half of SUMO's vehicle-steps are compared.
+    assert compared[2] > 0 and compared[0] >= 0.5 * compared[2], compared
+    # Still observed, not derived: most leaders are read off a lane list
+    # (93 % in the run this was written against). "All but the first vehicle
+    # on each lane" does not hold: on the merge, more vehicles per lane ask
+    # SUMO (7 % more asked than lanes held vehicles).
+    assert compared[1] > 0.5 * compared[0], compared
 
 
 def test_border_margin_widens_the_virtual_borders_and_eases_the_curves(tmp_path: Path) -> None:
@@ -696,8 +751,14 @@ def test_border_margin_widens_the_virtual_borders_and_eases_the_curves(tmp_path:
     geo_n = next(iter(narrow_run.tracks.geo_cache.values()))[0]
     geo_w = next(iter(wide_run.tracks.geo_cache.values()))[0]
     assert abs(float(geo_w.widths[0, 0]) - float(geo_n.widths[0, 0]) - 3.0) < 1e-12
+    # The ray to the border only gets longer as the border moves out, and the
+    # law's acceleration never falls as its obstacle moves away: no
+    # controlled vehicle is slowed more, and those the curves slowed (the
+    # ray shorter than the law's relevance distance) less. Strictly faster
+    # on the whole; with the margin ignored the runs would be the same
+    # (same seed), and equal speeds fail.
     speed = {m: sum(r.sum_v for r in res.records) / sum(r.steps for r in res.records) for m, (_, res) in runs.items()}
-    assert speed[3.0] > 1.05 * speed[0.0], speed
+    assert speed[3.0] > speed[0.0], speed
     with pytest.raises(sumo.ScenarioError, match="border margin"):
         RunOptions(border_margin_m=-1.0)
 
@@ -724,9 +785,22 @@ def test_controlled_vehicles_leave_at_speed_unless_told_to_stop_at_the_route_end
     assert r.returncode == 0, r.stderr
     assert json.loads((tmp_path / "stop" / "summary.json").read_text())["stop_at_route_end"] is True
     leave, stop = arrival_speeds(tmp_path / "leave"), arrival_speeds(tmp_path / "stop")
-    assert len(leave) >= 20 and len(stop) >= 20, (len(leave), len(stop))
-    assert float(np.median(leave)) > 15.0, np.median(leave)
-    assert float(np.median(stop)) < 8.0, np.median(stop)
+    # Closed form: the route's end is a standing obstacle route_end_extra_m
+    # = 5 m past the lane's end, and the stopping law never needs more than
+    # max_deceleration = 4 m/s^2 for it (planned from 200 m off, with
+    # max_obs_deceleration = max_deceleration in SUMO runs). SUMO takes the
+    # vehicle out in the step its front passes the lane's end, which began
+    # at most v dt = 0.1 v before it: v^2 <= 2 * 4 * (5 + 0.1 v), v <= 6.74
+    # m/s; the speed sent may exceed the vehicle's by 0.1 m/s + 2 %
+    # (GLIDE_TOLERANCE_*): 6.98 m/s. Leaving at speed, none brakes for the
+    # end, and the exit is free at this demand: all leave faster than that.
+    v_stop = (0.8 + math.sqrt(0.8**2 + 4 * 40.0)) / 2
+    bound = 1.02 * v_stop + 0.1
+    # Each bound holds for every arrival, not just most (29.5 m/s and at
+    # most 6.3 m/s in the run this was written against).
+    assert leave and stop, (len(leave), len(stop))
+    assert max(stop) <= bound, (max(stop), bound)
+    assert min(leave) > bound, min(leave)
 
 
 def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -819,6 +893,9 @@ def test_a_vehicle_handed_back_drives_on_under_sumo(tmp_path: Path) -> None:
     assert handed, "some controlled vehicle waits at a red light after 40 s"
     vid = next(iter(handed))
     assert vid not in run.active and {r.vid: r for r in result.records}[vid].reason == "handed_back"
+    # 5 m/s is below every lane's limit in the grid (13.89, 9.26, 6.51 m/s
+    # on turns): SUMO's driver (accel 2.6 m/s^2) passes it 2 s after the
+    # light lets it go, within the 160 s left; one held by a setSpeed never.
     assert max(speeds) > 5.0, f"{vid} handed back at {handed[vid]} s stood still (max speed {max(speeds):.2f} m/s)"
 
 
@@ -954,7 +1031,23 @@ def test_sumo_args_reach_sumo(tmp_path: Path) -> None:
         s = json.loads((tmp_path / name / "summary.json").read_text())
         counts.append(s["controlled_vehicles"] + s["background_vehicles"])
     full, half = counts
-    assert full >= 20 and 0.3 * full <= half <= 0.7 * full, counts
+    # Closed forms from the route file: SUMO (1.28) scales a flow by 0.5 by
+    # keeping every other of its vehicles, the first included (checked on
+    # plain sumo at ends of 170, 200, 300 and 500 s): ceil(n / 2) of a
+    # flow's n. Departures are due up to the end; one delayed longer than a
+    # minute means a blocked entry.
+    (rou,) = (SCENARIOS / "rural_loop").glob("*.rou.xml")
+
+    def due(until_s: float, keep: int) -> int:
+        n = 0
+        for f in ET.parse(rou).getroot().iter("flow"):
+            begin, period = float(f.get("begin", "nan")), float(f.get("period", "nan"))
+            k = math.ceil((min(float(f.get("end", "nan")), until_s) - begin) / period - 1e-9)
+            n += math.ceil(max(k, 0) / keep)
+        return n
+
+    assert due(140.0, 1) <= full <= due(200.0, 1), (counts, due(140.0, 1), due(200.0, 1))
+    assert due(140.0, 2) <= half <= due(200.0, 2), (counts, due(140.0, 2), due(200.0, 2))
 
 
 def test_net_sumo_rejects_is_one_line_and_exit_2(tmp_path: Path) -> None:

@@ -431,6 +431,43 @@ mod tests {
     }
 
     #[test]
+    fn a_speed_change_of_hold_speed_or_more_is_sent_below_it_held() {
+        // A vehicle the simulator has standing (speed 0) on lane 10, whose
+        // front is to move `dist` in a step of 1 s at an expected speed of
+        // `dist` m/s: the speed-only move is dist / dt = dist, a change of
+        // exactly `dist` from the simulator's 0. HOLD_SPEED_MPS is the
+        // smallest change that is sent ("below this ... no speed command"):
+        // 0.02 exactly is a Speed move, the next double below it a Hold.
+        let (f, a) = {
+            let (mut f, t) = fleet_on(road(None, true));
+            let a = f.add_vehicle(t, None, None, body(), at(50.0, 0.0)).unwrap() as i64;
+            (f, a)
+        };
+        let mut d = f.driven(a).unwrap().clone();
+        d.sumo_speed = 0.0;
+        d.known = Some((10, 53.5));
+        let glide = |dist: f64| {
+            let mut p = Placement {
+                mv: Move::Xy,
+                pos: 0.0,
+                sumo_speed: f64::NAN,
+                predicted: None,
+            };
+            let mv = glide_move(&d, &mut p, dist, dist, false, 1.0);
+            (mv, p.sumo_speed, p.predicted)
+        };
+        let (mv, speed, predicted) = glide(HOLD_SPEED_MPS);
+        assert_eq!(mv, Move::Speed);
+        assert_eq!(speed, HOLD_SPEED_MPS);
+        assert_eq!(predicted, Some((10, 53.5 + HOLD_SPEED_MPS)));
+        let below = f64::from_bits(HOLD_SPEED_MPS.to_bits() - 1);
+        let (mv, speed, predicted) = glide(below);
+        assert_eq!(mv, Move::Hold);
+        assert_eq!(speed, 0.0, "held: the simulator keeps its speed");
+        assert_eq!(predicted, Some((10, 53.5)));
+    }
+
+    #[test]
     fn a_vehicle_that_stops_leaves_the_simulator_standing_not_creeping() {
         // A red light ahead: the vehicle brakes to a stop at the line and
         // waits; the simulator, moved by the speeds sent, ends where it is.

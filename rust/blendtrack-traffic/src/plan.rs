@@ -647,6 +647,107 @@ mod tests {
     }
 
     #[test]
+    fn the_route_end_is_a_planned_stop_within_its_horizon() {
+        // With stop_at_route_end the end of the 600 m route is a stop
+        // route_end_extra_m (5 m) past it, planned once the gap to it is
+        // below route_end_horizon_m (200 m): gap = 605 - s_front within the
+        // horizon, no stop (NaN) beyond it, on both sides of the boundary
+        // (fronts at 405.5 and 404.5 m: gaps 199.5 and 200.5 m). The front
+        // is the rear axle plus the body's reach (3.5 m); the road's
+        // junction is on the major road (no stop of its own).
+        let settings = TrafficSettings {
+            stop_at_route_end: true,
+            ..Default::default()
+        };
+        let st = settings;
+        for (x, planned) in [(402.0, true), (401.0, false), (450.0, true), (200.0, false)] {
+            let (mut f, t) = fleet_with(road(None, true), settings);
+            let a = f.add_vehicle(t, None, None, body(), at(x, 15.0)).unwrap() as i64;
+            let sf = f.s_front(a).unwrap();
+            f.plan(&Observations {
+                slots: &[a],
+                leader_gap_m: &[f64::NAN],
+                leader_slot: &[-1],
+                leader_speed_mps: &[f64::NAN],
+                lane: &[-1],
+                lane_pos_m: &[f64::NAN],
+                soft: None,
+            })
+            .unwrap();
+            let gap = f.plan.as_ref().unwrap().stop_gap[0];
+            let want = 600.0 + st.route_end_extra_m - sf;
+            assert_eq!(want < st.route_end_horizon_m, planned, "x {x}: {want}");
+            if planned {
+                assert!(
+                    (gap - want).abs() < 1e-9,
+                    "x {x}: planned {gap}, want {want}"
+                );
+            } else {
+                assert!(
+                    gap.is_nan(),
+                    "x {x}: {want} m is beyond the horizon, planned {gap}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_soft_leader_is_braked_for_as_the_core_s_law_says_at_b_f_at_most() {
+        // A vehicle at its preferred speed (15 m/s, free flow 0) behind a soft
+        // leader (one on the lane beside, to line up behind) observed at
+        // `gap` m and `speed` m/s: the command is the core's law for a soft
+        // obstacle a standstill margin nearer, computed here from
+        // longitudinal_accel, and the step's acceleration (one control step,
+        // dv / dt) is that command. A standing one 20 m ahead asks for more
+        // than b_f: capped at max_deceleration (-4). One at 12 m/s 25 m
+        // ahead asks for less. Without the soft gap passed to the core the
+        // vehicle would not brake; without its speed, the moving one would be
+        // taken as standing.
+        let mut checked = 0;
+        for (gap, speed) in [(20.0, 0.0), (25.0, 12.0), (40.0, 15.0)] {
+            let (mut f, t) = fleet_with(road(None, true), one_control_step());
+            let a = f
+                .add_vehicle(t, None, None, body(), at(50.0, 15.0))
+                .unwrap() as i64;
+            let cfg = f.fleet.vehicle_config(a).unwrap().clone();
+            f.plan(&Observations {
+                slots: &[a],
+                leader_gap_m: &[f64::NAN],
+                leader_slot: &[-1],
+                leader_speed_mps: &[f64::NAN],
+                lane: &[-1],
+                lane_pos_m: &[f64::NAN],
+                soft: Some(SoftLeaders {
+                    gap_m: &[gap],
+                    slot: &[-1],
+                    speed_mps: &[speed],
+                }),
+            })
+            .unwrap();
+            let got = f.step(&[], DT).unwrap().accel_mps2[0];
+            let margin = f.settings().standstill_margin_m;
+            let want = blendtrack::longitudinal::longitudinal_accel(
+                15.0,
+                None,
+                &[blendtrack::Obstacle::soft(gap - margin, speed)],
+                &cfg,
+            )
+            .accel_mps2;
+            assert!(
+                (got - want).abs() < 1e-9,
+                "gap {gap}, speed {speed}: {got} vs {want}"
+            );
+            if speed == 0.0 {
+                assert_eq!(want, cfg.max_deceleration);
+            } else if speed == 12.0 {
+                assert!(want < 0.0 && want > cfg.max_deceleration, "{want}");
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 1);
+    }
+
+    #[test]
     fn by_default_the_vehicle_drives_through_the_end_of_its_route() {
         // Like SUMO's drivers (arrivalSpeed "current"): no slowing down for
         // the route's end at 600 m; the simulator takes the vehicle out there.

@@ -140,6 +140,41 @@ mod tests {
     }
 
     #[test]
+    fn acceleration_and_jerk_are_the_differences_of_the_speeds() {
+        // One control step of DT per step, from 10 m/s towards the preferred
+        // 15 m/s: each step's acceleration is (v_k - v_{k-1}) / DT from the
+        // speeds the outputs report, the jerk the difference of two
+        // accelerations over DT; the statistics hold the last acceleration
+        // and the sum of squared jerks over the 29 steps after the first.
+        let (mut f, t) = fleet_with(road(None, true), one_control_step());
+        let a = f
+            .add_vehicle(t, None, None, body(), at(50.0, 10.0))
+            .unwrap() as i64;
+        let mut v0 = 10.0;
+        let mut acc = Vec::new();
+        for _ in 0..30 {
+            let v = step(&mut f, &[a], false).1.v_mps[0];
+            acc.push((v - v0) / DT);
+            v0 = v;
+        }
+        let jerk2: f64 = acc.windows(2).map(|w| ((w[1] - w[0]) / DT).powi(2)).sum();
+        let s = f.stats(a).unwrap().tracking;
+        assert!(acc[0] > 0.1, "accelerating: {}", acc[0]);
+        assert!(
+            (s.last_acc - acc[29]).abs() < 1e-9,
+            "{} vs {}",
+            s.last_acc,
+            acc[29]
+        );
+        assert_eq!(s.jerk_n, 29);
+        assert!(
+            (s.sum_jerk2 - jerk2).abs() <= 1e-9 * jerk2.max(1.0),
+            "{} vs {jerk2}",
+            s.sum_jerk2
+        );
+    }
+
+    #[test]
     fn axle_errors_are_those_of_the_fixed_points() {
         // On the centreline, yawed by 0.1 rad: the rear axle is on the path,
         // the front axle (wheelbase 2.6 m ahead) 2.6 sin(0.1) m to the left,
