@@ -172,6 +172,29 @@ def test_could_change_lane_reads_sumo_state_bits() -> None:
 
 
 # ------------------------------------------------------------ target lane
+def test_a_lane_change_lasts_until_its_length_is_covered_pulling_away() -> None:
+    """(sqrt(v^2 + 2 a L) - v) / a: from standstill 10 m at 1 m/s^2 take
+    sqrt(20) s; at 10 m/s, 20 m take sqrt(140) - 10 s; at 2 m/s^2 from
+    standstill, sqrt(10) s. A follower at 18 m/s behind a changer starting
+    from standstill closes in 18 sqrt(20) - 10 = 70.5 m over the change,
+    so with the changer's mean speed (10 / sqrt(20)) the gap it needs is
+    5 + 70.5 m."""
+    assert lc.change_duration(0.0, 10.0, 1.0) == pytest.approx(math.sqrt(20.0))
+    assert lc.change_duration(10.0, 20.0, 1.0) == pytest.approx(math.sqrt(140.0) - 10.0)
+    assert lc.change_duration(0.0, 10.0, 2.0) == pytest.approx(math.sqrt(10.0))
+    # Never slower than at the present speed, whatever the acceleration.
+    assert lc.change_duration(10.0, 20.0, 0.0) <= 2.0
+    conn = FakeConn()
+    conn.vehicle.add("me", speed=0.0)
+    conn.vehicle.add("f", speed=18.0)
+    lcs = lane_changes(conn)
+    t = lc.change_duration(0.0, 10.0, 1.0)
+    need = 5.0 + 18.0 * t - 10.0
+    for gap, clear in [(need + 1e-3, True), (need - 1e-3, False)]:
+        conn.vehicle.neighbours = {("me", 0): [("f", gap)]}
+        assert lcs.target_lane_clear("me", 1, 10.0 / t, t) is clear, gap
+
+
 @pytest.mark.parametrize("direction, side", [(1, 0), (-1, 1)])
 def test_target_lane_clear_at_its_boundary(direction: int, side: int) -> None:
     """Follower at 14 m/s behind a changer at 10 m/s, 2 s change: it needs

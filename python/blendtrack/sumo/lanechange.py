@@ -87,14 +87,17 @@ TACTICAL_INSERTION_CLEAR_M = 200.0
 class LaneChanges:
     """The lane changes under way and due, and this step's soft leaders."""
 
-    def __init__(self, conn: SumoConnection, network: Network, tracks: Tracks, active: dict[str, Active], plan_decel: float) -> None:
+    def __init__(self, conn: SumoConnection, network: Network, tracks: Tracks, active: dict[str, Active], plan_decel: float,
+                 plan_accel: float = 1.0) -> None:
         self.conn = conn
         self.network = network
         self.tracks = tracks
         #: The runner's controlled vehicles by id (read only here).
         self.active = active
-        #: The deceleration (m/s^2, > 0) a vehicle plans to stop with.
+        #: The deceleration (m/s^2, > 0) a vehicle plans to stop with, and
+        #: the acceleration it pulls away with.
         self.plan_decel = plan_decel
+        self.plan_accel = plan_accel
         #: The vehicles changing lanes.
         self.changing: dict[str, Active] = {}
         #: Vehicles where a lane change is due: (vid, lane, lane position, speed).
@@ -192,7 +195,8 @@ class LaneChanges:
             # on the target lane while the vehicle stood. Check again.
             speed = float(v.getSpeed(act.vid))
             length = change_length(speed, math.inf)
-            if not self.target_lane_clear(act.vid, direction, speed, length / max(abs(speed), 1.0)):
+            duration = change_duration(speed, length, self.plan_accel)
+            if not self.target_lane_clear(act.vid, direction, length / duration, duration):
                 self.abort_change(act)
                 return lead
         if self.left_behind(act, lead):
@@ -258,9 +262,10 @@ class LaneChanges:
         # SUMO (without the sublane model) shows the vehicle on the target
         # lane only once its centre is over the line, so vehicles there do
         # not react to it before: start only with room for the whole change
-        # (its duration, at the present speed or 1 m/s, times the closing
-        # speed) plus a margin.
-        if not self.target_lane_clear(act.vid, direction, speed, length / max(abs(speed), 1.0)):
+        # (what the follower closes in while the vehicle covers the change's
+        # length, pulling away from its present speed) plus a margin.
+        duration = change_duration(speed, length, self.plan_accel)
+        if not self.target_lane_clear(act.vid, direction, length / duration, duration):
             self.wait_for_gap(act.vid, direction, target_lane, pos, speed)
             return
         geo2, track = self.tracks.geometry(geo.edges[k_edge:], current, change=(pos, length))
@@ -522,6 +527,18 @@ def tactical_gap(rear: float, front: float, factor: float) -> float:
     at ``rear`` m/s and a front one at ``front`` (see ``TACTICAL_HEADWAY_S``)."""
     rear, front = max(rear, 0.0), max(front, 0.0)
     return LANE_CHANGE_GAP_M + factor * (TACTICAL_HEADWAY_S * rear + max(rear * rear - front * front, 0.0) / (2.0 * TACTICAL_DECEL_MPS2))
+
+
+def change_duration(speed: float, length: float, accel: float) -> float:
+    """How long (s) a lane change of ``length`` m takes a vehicle at
+    ``speed`` m/s that pulls away at ``accel`` m/s^2:
+    (sqrt(v^2 + 2 a L) - v) / a. From a standstill 10 m take sqrt(20) =
+    4.5 s at 1 m/s^2; taken at a crawl of 1 m/s they were 10 s, during
+    which traffic at 18 m/s on the target lane closes in 180 m, a gap that
+    never came: a vehicle at the end of its lane waited for it until SUMO
+    teleported it (Eccles, 300 s)."""
+    v, a = max(speed, 0.0), max(accel, 1e-3)
+    return (math.sqrt(v * v + 2.0 * a * length) - v) / a
 
 
 def change_length(speed: float, room_m: float) -> float:

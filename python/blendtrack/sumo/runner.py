@@ -128,7 +128,8 @@ class SumoRun:
         self.histograms = SampleHistograms()
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel,
                                    float(base_config.preferred_acceleration))
-        self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel)
+        self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel,
+                                 float(base_config.preferred_acceleration))
         self.stops = Stops(self.conn, self.fleet, self.network, self.tracks.lanes)
         obs_decel = base_config.max_obs_deceleration if "max_obs_deceleration" in options.fixed_keys else base_config.max_deceleration
         self.sumo_leaders = SumoLeaders(self.conn, self.active, max(abs(float(obs_decel)), 0.5))
