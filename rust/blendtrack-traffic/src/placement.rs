@@ -59,6 +59,17 @@ pub(crate) fn glide_distance(
     if pieces[k].lane == lane {
         return Some((target - p, false));
     }
+    // Already over the lane's end, on the next piece's lane (entered at its
+    // start): ahead of the target by the rest of this lane and its position
+    // there. Slowed, never put back: a vehicle standing at a junction's
+    // entry that the simulator had 1 cm into the junction was moved back
+    // onto the lane before it, where the simulator then found the vehicle
+    // behind within its minGap and called it a collision (Eccles).
+    if let Some(next) = pieces.get(k + 1) {
+        if next.lane == lane && next.lane_pos_start_m == 0.0 {
+            return Some((target - pieces[k].lane_length_m - p, false));
+        }
+    }
     // Over lane ends: each piece from the known lane on must be a whole lane
     // that the simulator enters at its start.
     let mut dist = target;
@@ -283,6 +294,42 @@ mod tests {
         let out = f.step(&[], DT).unwrap();
         assert_eq!(out.moves, [Move::Lane]);
         assert!((out.lane_pos_m[0] + out.v_mps[0] * DT - f.s_front(a).unwrap()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_vehicle_the_simulator_has_just_past_its_lane_end_is_not_put_back() {
+        // Stopped at a red light 1 m short of the line (lane 10 ends at
+        // 200 m); the simulator reports the front 0.01 m into the junction
+        // lane (11): the move keeps it there (speed 0), it is not placed
+        // back onto lane 10.
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        f.set_signal(0, &[Signal::Stop]).unwrap();
+        let a = f
+            .add_vehicle(t, None, None, body(), at(180.0, 5.0))
+            .unwrap() as i64;
+        for _ in 0..300 {
+            step(&mut f, &[a], false);
+        }
+        assert!(f.state(a).unwrap().v_mps.abs() < 1e-3);
+        for (lane, pos) in [(11, 0.01), (11, 0.4)] {
+            f.plan(&Observations {
+                slots: &[a],
+                leader_gap_m: &[f64::NAN],
+                leader_slot: &[-1],
+                leader_speed_mps: &[f64::NAN],
+                lane: &[lane],
+                lane_pos_m: &[pos],
+                soft: None,
+            })
+            .unwrap();
+            let out = f.step(&[], DT).unwrap();
+            assert!(
+                matches!(out.moves[0], Move::Speed | Move::Hold),
+                "{:?}",
+                out.moves
+            );
+            assert_eq!(out.sumo_speed_mps[0], 0.0);
+        }
     }
 
     #[test]
