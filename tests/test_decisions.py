@@ -618,3 +618,27 @@ def test_zipper_orders_two_controlled_vehicles_by_one_measure() -> None:
     conn.vehicle.cars["C"]["pos"] = 12.0
     conn.lanes["B_0"] = ["B", "C"]
     assert z.leaders(order) == [("A", ("B", 0.0))]
+
+
+def test_a_barely_started_lane_change_is_given_up_when_its_room_goes(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A change the route needs, still within 0.5 m of its lane's centre, is
+    checked again each step: standing, a 10 m change takes sqrt(20) s at
+    1 m/s^2, so a follower at 18 m/s on the target lane needs 5 + 18
+    sqrt(20) - 10 = 75.5 m; just under that the change is given up, just
+    over it goes on; past 0.5 m from the centre it is never given up."""
+    from blendtrack.sumo.tracks import Active
+
+    conn = FakeConn()
+    conn.vehicle.add("me", speed=0.0, lat=0.1, lane="e_0", lane_index=0)
+    conn.vehicle.add("f", speed=18.0)
+    lcs = lane_changes(conn)
+    aborted: list[str] = []
+    monkeypatch.setattr(lcs, "abort_change", lambda act: aborted.append(act.vid))
+    act = Active("me", 0, None, "", None, changing=(1, 1))  # type: ignore[arg-type]
+    need = 5.0 + 18.0 * math.sqrt(20.0) - 10.0
+    for gap, lat, gives_up in [(need - 1e-3, 0.1, True), (need + 1e-3, 0.1, False), (need - 1e-3, 0.6, False)]:
+        aborted.clear()
+        conn.vehicle.cars["me"]["lat"] = lat
+        conn.vehicle.neighbours = {("me", 0): [("f", gap)]}
+        lcs.changing_leader(act, None)
+        assert aborted == (["me"] if gives_up else []), (gap, lat)

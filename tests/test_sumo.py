@@ -480,12 +480,14 @@ def test_the_tighter_of_two_leaders_is_the_one_the_stopping_law_brakes_harder_fo
     assert run.lanes.tighter_leader(("", -1.0), ("near", 5.0)) == ("near", 5.0)
 
 
-def test_lane_change_is_given_up_when_the_room_goes(tmp_path: Path) -> None:
-    """A merging vehicle that waits at the start of its lane change checks the
-    target lane again and gives the change up when a follower comes up there.
-    Setting: the ramp of the highway jammed (the paper's max_obs_deceleration,
-    demand x3, the first 100 vehicles controlled); without the check this ran
-    into 11 collisions at the end of the acceleration lane."""
+def test_a_jammed_ramp_merges_without_collisions(tmp_path: Path) -> None:
+    """The ramp of the highway jammed (the paper's max_obs_deceleration,
+    demand x3, the first 100 vehicles controlled): vehicles wait at the end
+    of the acceleration lane, start their changes from a crawl, give them up
+    when a follower comes up (the rule at its boundary:
+    test_decisions.py::test_a_barely_started_lane_change_is_given_up_when_its_room_goes);
+    without that check this ran into 11 collisions at the end of the
+    acceleration lane. No collision in SUMO's own output."""
     sc = sumo.resolve_scenario("highway_onramp")
     cfg = blendtrack.ControllerConfig(max_obs_deceleration=-8.0)
     opts = RunOptions(
@@ -494,7 +496,6 @@ def test_lane_change_is_given_up_when_the_room_goes(tmp_path: Path) -> None:
         sumo_args=("--scale", "3", "--no-warnings", "true"), progress=False,
     )
     result = sumo.run_scenario(sc, opts, tmp_path)
-    assert result.summary["lane_changes_aborted"] >= 1
     assert result.summary["collisions"] == 0 and _collisions(tmp_path) == []
 
 
