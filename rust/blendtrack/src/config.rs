@@ -170,7 +170,7 @@ impl Default for ControllerConfig {
             // Tuned on the training tracks only (test_track, Nuerburgring;
             // docs/paper.md, "Automatic alpha").
             auto_alpha_forward: 0.3,
-            auto_alpha_backward: 0.8,
+            auto_alpha_backward: 0.9,
             auto_alpha_curve_gain: 10.0,
             auto_alpha_curvature_change_gain: 1.0,
             auto_alpha_preview_s: 0.5,
