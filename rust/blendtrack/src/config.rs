@@ -121,13 +121,16 @@ pub struct ControllerConfig {
     pub auto_alpha_forward: f64,
     pub auto_alpha_backward: f64,
     /// How much of a curve there is to balance: `min(1, gain E |kappa|)`
-    /// (>= 0, dimensionless; `kappa` = the largest curvature over the preview).
+    /// (>= 0, dimensionless; `kappa` = the steady curvature, the smallest
+    /// |curvature| from the trailing axle to the preview ahead of the leading
+    /// one, 0 across a straight or a change of sign: `lateral::steady_curvature`).
     pub auto_alpha_curve_gain: f64,
     /// Weight (>= 0, dimensionless) of the rear law's predicted error where
     /// the curvature changes ahead, `d^2 |forcing| / 2` in wheelbases.
     pub auto_alpha_curvature_change_gain: f64,
-    /// Preview time (s, > 0): the curvature ahead is read over
-    /// `max(E, auto_alpha_preview_s * |v|)` metres.
+    /// Preview time (s, > 0): the curvature is read up to
+    /// `max(E, auto_alpha_preview_s * |v|)` metres ahead of the leading axle,
+    /// the forcing over that many metres ahead of the rear axle.
     pub auto_alpha_preview_s: f64,
     /// Axle error (m, > 0) from which the leading axle's law takes over fully.
     pub auto_alpha_large_error_m: f64,
@@ -168,9 +171,10 @@ impl Default for ControllerConfig {
             ray_horizon_m: 200.0,
             alpha_mode: AlphaMode::Fixed,
             // Tuned on the training tracks only (test_track, Nuerburgring;
-            // docs/paper.md, "Automatic alpha").
+            // docs/paper.md, "Automatic alpha"); auto_alpha_backward re-chosen
+            // there for the steady curvature (scripts/auto_alpha_loo.py).
             auto_alpha_forward: 0.3,
-            auto_alpha_backward: 0.8,
+            auto_alpha_backward: 0.9,
             auto_alpha_curve_gain: 10.0,
             auto_alpha_curvature_change_gain: 1.0,
             auto_alpha_preview_s: 0.5,

@@ -12,13 +12,18 @@ use crate::curve_speed::{curve_accel, CurveProfile};
 use crate::error::{ConfigError, StateError};
 use crate::lateral::{
     auto_alpha, blend, lookahead_forcing, pure_pursuit_command, rear_command, stanley_command,
-    travel_heading, AutoAlphaInputs, AutoAlphaParams, LateralGains, Travel,
+    steady_curvature, travel_heading, AutoAlphaInputs, AutoAlphaParams, LateralGains, Travel,
 };
 use crate::longitudinal::{longitudinal_accel, relevance_distance, Corridor, Obstacle};
 use crate::path::{wrap_angle, Path};
 use crate::vehicle::{VehicleParams, VehicleState};
 use nalgebra::{Point2, Vector2};
 use std::sync::Arc;
+
+/// Largest spacing (m) of the curvature samples automatic alpha reads its
+/// steady curvature from (a few samples per wheelbase: a curve or a straight
+/// piece shorter than this may fall between two samples).
+pub const STEADY_SAMPLE_M: f64 = 0.5;
 
 /// A path, its virtual borders and its curvature profile.
 #[derive(Debug, Clone)]
@@ -185,20 +190,32 @@ impl Controller {
     }
 
     /// The automatic blend factor for this step (`alpha_mode = "auto"`): the
-    /// path's largest curvature and the rear law's largest forcing over the
-    /// preview window ahead of the rear axle's foot (4 points over
-    /// `max(E, auto_alpha_preview_s |v|)`) and the axle errors, through [`auto_alpha`].
+    /// rear law's largest forcing over the preview window ahead of the rear
+    /// axle's foot (4 points over `P = max(E, auto_alpha_preview_s |v|)`), the
+    /// path's [`steady_curvature`] from the trailing axle's foot to `P` ahead
+    /// of the leading axle's (samples at most [`STEADY_SAMPLE_M`] apart) and
+    /// the axle errors, through [`auto_alpha`].
     fn auto_alpha(&self, s_rear: f64, e_front: f64, e_rear: f64, speed: f64) -> f64 {
         let g = self.gains();
         let path = &self.track.path;
+        let e = g.wheelbase_m;
         let l = g.curvature_lookahead(speed);
-        let preview = g.wheelbase_m.max(self.cfg.auto_alpha_preview_s * speed);
-        let (mut forcing, mut kappa) = (0.0f64, 0.0f64);
+        let preview = e.max(self.cfg.auto_alpha_preview_s * speed);
+        let mut forcing = 0.0f64;
         for k in 0..4 {
             let s = s_rear + preview * k as f64 / 3.0;
             forcing = forcing.max(lookahead_forcing(path, s, l).abs());
-            kappa = kappa.max(path.curvature_at(s).abs());
         }
+        // Arc length grows along the direction of travel: forward the front
+        // axle leads (at s_rear + E), backward it trails (at s_rear - E).
+        let (from, to) = match self.cfg.direction {
+            crate::vehicle::Direction::Forward => (s_rear, s_rear + e + preview),
+            crate::vehicle::Direction::Backward => (s_rear - e, s_rear + preview),
+        };
+        let n = ((to - from) / STEADY_SAMPLE_M).ceil().clamp(1.0, 256.0) as usize;
+        let kappa = steady_curvature(
+            (0..=n).map(|k| path.curvature_at(from + (to - from) * k as f64 / n as f64)),
+        );
         auto_alpha(
             &self.auto,
             &AutoAlphaInputs {

@@ -257,7 +257,9 @@ pub struct AutoAlphaInputs {
     pub wheelbase_m: f64,
     /// Target distance `d` of the rear law at the current speed (m).
     pub target_distance_m: f64,
-    /// Largest |curvature| of the path over the preview window ahead (1/m).
+    /// Steady |curvature| of the path (1/m): [`steady_curvature`] of the
+    /// curvature sampled from the trailing axle's foot to the end of the
+    /// preview ahead of the leading axle's foot.
     pub curvature_abs_per_m: f64,
     /// Largest |forcing| of the rear law over the preview window ahead (1/m):
     /// [`lookahead_forcing`] at the rear axle's foot and a few points ahead.
@@ -279,6 +281,29 @@ pub fn lookahead_forcing(path: &Path, s: f64, lookahead_m: f64) -> f64 {
     dtheta / lookahead_m - path.curvature_at(s)
 }
 
+/// The curvature the whole vehicle and the preview ahead of it share: the
+/// smallest |curvature| of the samples, or 0 when they change sign (an
+/// S-bend) or any is 0 (a straight within the window); NaN if any is NaN.
+/// On a circle of radius R, 1/R; at a curve's entry or exit (part of the
+/// window still on the straight) and in a chicane, 0. An empty window gives 0.
+pub fn steady_curvature(samples: impl IntoIterator<Item = f64>) -> f64 {
+    let (mut min_abs, mut pos, mut neg, mut any) = (f64::INFINITY, false, false, false);
+    for k in samples {
+        if k.is_nan() {
+            return f64::NAN;
+        }
+        any = true;
+        pos |= k > 0.0;
+        neg |= k < 0.0;
+        min_abs = min_abs.min(k.abs());
+    }
+    if !any || (pos && neg) {
+        0.0
+    } else {
+        min_abs
+    }
+}
+
 /// Automatic blend factor, a pure function of the step's state:
 ///
 /// `alpha = clamp(lead + (base - lead) c (1 - w_k) (1 - w_e) + g_e (|e_front| - |e_rear|), 0, 1)`
@@ -292,8 +317,12 @@ pub fn lookahead_forcing(path: &Path, s: f64, lookahead_m: f64) -> f64 {
 ///   the front axle on it and the rear axle cuts the curve by about
 ///   `E^2 |kappa| / 2`; the rear law does the opposite. A control point
 ///   between them splits the difference (about `E^2 |kappa| / 4` each).
-/// - `c = min(1, curve_gain E |kappa|)`, `kappa` the largest curvature over the
-///   preview window: how much of a curve there is to balance.
+/// - `c = min(1, curve_gain E |kappa|)`, `kappa` the [`steady_curvature`]
+///   over the vehicle and the preview ahead of it: how much of a curve there
+///   is to balance. Only a curve that holds under both axles and ahead
+///   counts: where the curvature changes (entries, exits, chicanes shorter
+///   than the window) the vehicle is in a transient, not in the steady curve
+///   where moving the control point splits the cut; there the leading law.
 /// - `w_k = min(1, curvature_change_gain (d^2 |f| / 2) / E)`: the rear law's
 ///   predicted steady error where the curvature changes ahead
 ///   ([`lookahead_forcing`]), in wheelbases; there the leading law keeps the
@@ -638,6 +667,22 @@ mod tests {
             auto_alpha(&p, &auto_inputs(bw, 0.05, f64::NAN, 0.0, 0.0)),
             0.0
         );
+    }
+
+    #[test]
+    fn steady_curvature_is_the_curve_the_whole_window_shares() {
+        // One sign: the smallest magnitude (the curve under the whole window).
+        assert_eq!(steady_curvature([0.05, 0.04, 0.06]), 0.04);
+        assert_eq!(steady_curvature([-0.05, -0.04, -0.06]), 0.04);
+        assert_eq!(steady_curvature([0.025]), 0.025);
+        // A straight piece inside (an entry or exit), or a change of sign (an
+        // S-bend): no steady curve.
+        assert_eq!(steady_curvature([0.0, 0.02, 0.05]), 0.0);
+        assert_eq!(steady_curvature([0.05, 0.05, -0.001]), 0.0);
+        assert_eq!(steady_curvature(std::iter::empty()), 0.0);
+        assert!(steady_curvature([0.05, f64::NAN, 0.05]).is_nan());
+        // The old reading (largest |kappa|) would give 0.06 and 0.05 here.
+        assert!(steady_curvature([0.0, 0.06]) < steady_curvature([0.01, 0.06]));
     }
 
     #[test]

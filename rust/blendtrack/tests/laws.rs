@@ -285,3 +285,115 @@ fn reversing_on_a_circle_holds_the_front_axle_on_it() {
         }
     }
 }
+
+/// A straight along +x (0..60 m), a left arc of radius `r` over `arc_m`,
+/// then (with `s_bend`) a right arc of the same radius and length, then a
+/// straight of 60 m; points every 0.25 m. Returns the path and where the
+/// first arc starts and ends (arc length).
+fn straight_arc_path(r: f64, arc_m: f64, s_bend: bool) -> (Path, f64, f64) {
+    let ds = 0.25;
+    let (x0, arc_start) = (60.0, 60.0);
+    let arc_end = arc_start + arc_m;
+    let bends = if s_bend { 2.0 } else { 1.0 };
+    let total = arc_start + bends * arc_m + 60.0;
+    let (mut x, mut y, mut th) = (0.0f64, 0.0f64, 0.0f64);
+    let mut pts = vec![[x, y]];
+    let n = (total / ds) as usize;
+    for i in 0..n {
+        let s = (i as f64 + 0.5) * ds;
+        let k = if s < x0 || s >= arc_start + bends * arc_m {
+            0.0
+        } else if s < arc_end {
+            1.0 / r
+        } else {
+            -1.0 / r
+        };
+        let mid = th + 0.5 * k * ds;
+        x += ds * mid.cos();
+        y += ds * mid.sin();
+        th += k * ds;
+        pts.push([x, y]);
+    }
+    (Path::new(&pts, None, false).unwrap(), arc_start, arc_end)
+}
+
+/// The automatic alpha of one step with the rear axle on the path at `s`,
+/// aligned with it (reversing: heading flipped), at 1 m/s.
+fn auto_alpha_at(track: &Arc<Track>, cfg: &ControllerConfig, s: f64) -> f64 {
+    let p = &track.path;
+    let pt = p.point_at(s);
+    let (x, y) = (pt.x, pt.y);
+    let th = p.heading_at(s);
+    let (theta, v) = match cfg.direction {
+        Direction::Forward => (th, 1.0),
+        Direction::Backward => (wrap_angle(th + std::f64::consts::PI), -1.0),
+    };
+    let state = VehicleState {
+        x_m: x,
+        y_m: y,
+        theta_rad: theta,
+        v_mps: v,
+        delta_rad: 0.0,
+    };
+    let mut c = Controller::new(track.clone(), cfg.clone(), &VehicleParams::default()).unwrap();
+    c.step(&state, &[]).unwrap().alpha
+}
+
+#[test]
+fn auto_alpha_moves_only_where_the_whole_vehicle_and_its_preview_share_a_curve() {
+    // Reversing at 1 m/s the window of the steady curvature runs from the
+    // trailing front axle (s - E) to the preview P = max(E, 0.5 s * 1 m/s) = E
+    // ahead of the leading rear axle: [s - 2.6, s + 2.6]. The path's
+    // curvature is a centred heading difference over 2 m, so it is 1/R from
+    // 1 m inside an arc on and 0 from 1 m outside it; samples lie at most
+    // 0.5 m apart. With R = 20 m, c = min(1, 10 E / R) = 1 and there is no
+    // forcing in the arc's interior: alpha = auto_alpha_backward exactly.
+    // Wherever the window reaches 1.5 m (1 m + a sample) into a straight or
+    // across the change of sign of an S-bend: alpha = 0, the rear law. The
+    // previous law (largest curvature ahead of the rear axle) moved the point
+    // as soon as the curve came into the preview, which this test refuses.
+    let cfg = ControllerConfig {
+        direction: Direction::Backward,
+        alpha_mode: AlphaMode::Auto,
+        auto_alpha_backward: 0.6,
+        auto_alpha_large_error_m: 1e6,
+        ..Default::default()
+    };
+    let e = VehicleParams::default().wheelbase_m;
+    let (path, a0, a1) = straight_arc_path(20.0, 40.0, false);
+    let track = Arc::new(Track::new(path, &cfg));
+    let margin = 1.5;
+    // Window inside the arc with room for the curvature's 1 m ramp and the
+    // forcing's look-ahead L = 2E past the preview.
+    for s in [a0 + e + margin, a0 + 15.0, a1 - 3.0 * e - margin] {
+        let a = auto_alpha_at(&track, &cfg, s);
+        // 1e-6: the polyline's chord headings leave the forcing a trace
+        // (~1e-7 of alpha) where the exact arc has none.
+        assert!((a - 0.6).abs() < 1e-6, "s = {s}: alpha {a}");
+    }
+    // The rear axle already in the curve (or just before it) but the front
+    // axle, or the window ahead, still on a straight: the rear law.
+    for s in [a0 - e, a0, a0 + e - margin, a1 - e + margin, a1 + 1.0] {
+        let a = auto_alpha_at(&track, &cfg, s);
+        assert!(a.abs() < 1e-9, "s = {s}: alpha {a}");
+    }
+    // S-bend: left then right arcs of 20 m; across the change of sign at a1.
+    let (sb, _, a1) = straight_arc_path(20.0, 40.0, true);
+    let track = Arc::new(Track::new(sb, &cfg));
+    for s in [a1 - e + margin, a1 - 1.0, a1, a1 + 1.0, a1 + e - margin] {
+        let a = auto_alpha_at(&track, &cfg, s);
+        assert!(a.abs() < 1e-9, "s = {s}: alpha {a}");
+    }
+    // Forward the front axle leads: the window is [s, s + E + P] with
+    // P = max(E, 0.5 s * 1 m/s) = E; the base forward is auto_alpha_forward,
+    // and with the rear axle 1 m into the arc the window is in the arc.
+    let fw = ControllerConfig {
+        direction: Direction::Forward,
+        auto_alpha_forward: 0.3,
+        ..cfg.clone()
+    };
+    let (path, a0, _) = straight_arc_path(20.0, 40.0, false);
+    let track = Arc::new(Track::new(path, &fw));
+    assert!((auto_alpha_at(&track, &fw, a0 + 15.0) - 0.3).abs() < 1e-6);
+    assert!((auto_alpha_at(&track, &fw, a0 - 0.5 - margin) - 1.0).abs() < 1e-9);
+}
