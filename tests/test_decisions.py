@@ -555,7 +555,8 @@ def test_junction_blocked_by_a_body_within_the_half_width() -> None:
     v.add("o", width=2.0, length=5.0, angle=0.0, xy=(10.0, 7.3 - 1e-3))
     conn.lanes[":j_0"] = ["me", "o"]
     path = np.array([[0.0, 0.0], [20.0, 0.0]])
-    network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]))
+    origin = {"in_0": "a_0", ":j_0": "b_0"}
+    network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]), from_lane=lambda lane: origin.get(lane))
     j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
     assert j.junction_blocked("me", "in_0") and j.counts["inside_junction_waits"] == 1
     v.cars["o"]["xy"] = (10.0, 7.3 + 1e-3)
@@ -566,6 +567,33 @@ def test_junction_blocked_by_a_body_within_the_half_width() -> None:
     network.junction_lanes = lambda via: (path, [])
     v.cars["o"]["xy"] = (10.0, 0.0)
     assert not j.junction_blocked("me", "in_0")
+
+
+def test_a_vehicle_ahead_from_the_same_lane_is_followed_not_waited_for() -> None:
+    """A vehicle inside the junction in the path that entered from the same
+    lane (a left turner ahead of a straight-on vehicle) blocks only while
+    it stands (below 0.1 m/s) or its back is not yet past the line (lane
+    position below its 5 m length); from another lane it blocks whatever it
+    does."""
+    import numpy as np
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", width=2.0)
+    v.add("o", width=2.0, length=5.0, angle=90.0, xy=(8.0, 0.0), speed=3.0, pos=5.0)
+    conn.lanes[":j_0"] = ["o"]
+    path = np.array([[0.0, 0.0], [20.0, 0.0]])
+    origin = {"in_0": "a_0", ":j_0": "a_0"}
+    network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]), from_lane=lambda lane: origin.get(lane))
+    j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
+    assert not j.junction_blocked("me", "in_0")
+    for speed, pos in [(0.1 - 1e-3, 5.0), (3.0, 5.0 - 1e-3)]:
+        v.cars["o"].update(speed=speed, pos=pos)
+        assert j.junction_blocked("me", "in_0"), (speed, pos)
+    v.cars["o"].update(speed=0.1, pos=5.0)
+    assert not j.junction_blocked("me", "in_0")
+    origin[":j_0"] = "c_0"
+    assert j.junction_blocked("me", "in_0")
 
 
 # ------------------------------------------------------------ zipper merges

@@ -205,9 +205,19 @@ class Junctions:
             return False
         veh = self.conn.sumo.vehicle
         reach = 0.5 * float(veh.getWidth(vid)) + INSIDE_MARGIN_M
+        origin = self.network.from_lane(via)
         for lane in lanes:
+            # A vehicle that entered from the same lane and drives on ahead
+            # (its back past the line, at SUMO's halting speed or more) is
+            # one to follow, not a foe: waiting until it had left the path,
+            # a straight-on vehicle behind left turners crossed a green light
+            # only after each of them (Bologna, 204c).
+            same = origin is not None and self.network.from_lane(lane) == origin
             for other in self.conn.vehicles_on(lane):
                 if other == vid:
+                    continue
+                if same and float(veh.getSpeed(other)) >= HALT_SPEED_MPS \
+                        and float(veh.getLanePosition(other)) >= float(veh.getLength(other)):
                     continue
                 body, half = body_segment(veh, other)
                 if segments_distance(body, path) < reach + half:

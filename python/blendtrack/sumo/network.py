@@ -60,6 +60,12 @@ class Network:
                             self._conn_of_via[part.getID()] = c
         return self._conn_of_via.get(via)
 
+    def from_lane(self, via: str) -> str | None:
+        """The lane the connection through junction lane ``via`` leaves
+        from (None for a lane of no connection)."""
+        c = self.connection_of(via)
+        return None if c is None else str(c.getFromLane().getID())
+
     def is_zipper(self, via: str) -> bool:
         """Is ``via`` a junction lane of a zipper link (state Z)?"""
         c = self.connection_of(via)
