@@ -312,16 +312,7 @@ mod tests {
         }
         assert!(f.state(a).unwrap().v_mps.abs() < 1e-3);
         for (lane, pos) in [(11, 0.01), (11, 0.4)] {
-            f.plan(&Observations {
-                slots: &[a],
-                leader_gap_m: &[f64::NAN],
-                leader_slot: &[-1],
-                leader_speed_mps: &[f64::NAN],
-                lane: &[lane],
-                lane_pos_m: &[pos],
-                soft: None,
-            })
-            .unwrap();
+            plan_one(&mut f, a, (f64::NAN, f64::NAN), (lane, pos));
             let out = f.step(&[], DT).unwrap();
             assert!(
                 matches!(out.moves[0], Move::Speed | Move::Hold),

@@ -542,16 +542,7 @@ mod tests {
             let sf = f.s_front(slot).unwrap();
             // A standing leader whose back is 3 m past the junction's exit.
             let gap = 213.0 - sf;
-            f.plan(&Observations {
-                slots: &[slot],
-                leader_gap_m: &[gap],
-                leader_slot: &[-1],
-                leader_speed_mps: &[0.0],
-                lane: &[-1],
-                lane_pos_m: &[f64::NAN],
-                soft: None,
-            })
-            .unwrap();
+            plan_one(&mut f, slot, (gap, 0.0), (-1, f64::NAN));
             f.step(&[], DT).unwrap();
         }
         let sf = f.s_front(slot).unwrap();
@@ -578,16 +569,7 @@ mod tests {
             let back = 211.0 + 0.3 * k as f64 * DT;
             let gap = back - f.s_front(slot).unwrap();
             closest = closest.min(gap);
-            f.plan(&Observations {
-                slots: &[slot],
-                leader_gap_m: &[gap],
-                leader_slot: &[-1],
-                leader_speed_mps: &[0.3],
-                lane: &[-1],
-                lane_pos_m: &[f64::NAN],
-                soft: None,
-            })
-            .unwrap();
+            plan_one(&mut f, slot, (gap, 0.3), (-1, f64::NAN));
             f.step(&[], DT).unwrap();
         }
         let sf = f.s_front(slot).unwrap();
@@ -664,16 +646,7 @@ mod tests {
             let (mut f, t) = fleet_with(road(None, true), settings);
             let a = f.add_vehicle(t, None, None, body(), at(x, 15.0)).unwrap() as i64;
             let sf = f.s_front(a).unwrap();
-            f.plan(&Observations {
-                slots: &[a],
-                leader_gap_m: &[f64::NAN],
-                leader_slot: &[-1],
-                leader_speed_mps: &[f64::NAN],
-                lane: &[-1],
-                lane_pos_m: &[f64::NAN],
-                soft: None,
-            })
-            .unwrap();
+            plan_one(&mut f, a, (f64::NAN, f64::NAN), (-1, f64::NAN));
             let gap = f.plan.as_ref().unwrap().stop_gap[0];
             let want = 600.0 + st.route_end_extra_m - sf;
             assert_eq!(want < st.route_end_horizon_m, planned, "x {x}: {want}");

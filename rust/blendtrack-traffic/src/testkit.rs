@@ -151,20 +151,32 @@ impl Sim {
     }
 }
 
+/// Plans vehicle `slot` alone, behind a leader at `leader` (gap m, speed
+/// m/s; a NaN gap: none), the simulator having its front at `at` (lane,
+/// position; lane < 0: not read); returns the yield questions.
+pub(crate) fn plan_one(
+    f: &mut RouteFleet,
+    slot: i64,
+    leader: (f64, f64),
+    at: (i64, f64),
+) -> Vec<usize> {
+    f.plan(&Observations {
+        slots: &[slot],
+        leader_gap_m: &[leader.0],
+        leader_slot: &[-1],
+        leader_speed_mps: &[leader.1],
+        lane: &[at.0],
+        lane_pos_m: &[at.1],
+        soft: None,
+    })
+    .unwrap()
+}
+
 /// One plan + step for one vehicle that reports the simulator's lane
 /// position when asked to; returns the outputs.
 pub(crate) fn sim_step(f: &mut RouteFleet, slot: i64, sim: &mut Sim, report: bool) -> RouteOutputs {
-    let (lane, pos) = if report { sim.obs() } else { (-1, f64::NAN) };
-    f.plan(&Observations {
-        slots: &[slot],
-        leader_gap_m: &[f64::NAN],
-        leader_slot: &[-1],
-        leader_speed_mps: &[f64::NAN],
-        lane: &[lane],
-        lane_pos_m: &[pos],
-        soft: None,
-    })
-    .unwrap();
+    let at = if report { sim.obs() } else { (-1, f64::NAN) };
+    plan_one(f, slot, (f64::NAN, f64::NAN), at);
     let out = f.step(&[], DT).unwrap();
     sim.apply(&out, 0);
     out
