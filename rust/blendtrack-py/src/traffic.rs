@@ -330,7 +330,7 @@ impl RouteFleet {
         let occurrence = occurrence.map(|k| u32_of("occurrence", 0, k)).transpose()?;
         let slot = self
             .inner
-            .add_vehicle_at(track_id, cfg, params, body, state, occurrence)
+            .add_vehicle(track_id, cfg, params, body, state, occurrence)
             .map_err(traffic_error)?;
         if self.name_of.len() <= slot {
             self.name_of.resize(slot + 1, None);

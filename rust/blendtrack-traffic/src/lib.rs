@@ -333,23 +333,11 @@ impl RouteFleet {
         Ok((path.project(&front).s, false))
     }
 
-    /// Adds a vehicle at `state` (its rear axle) on a track; returns its slot.
+    /// Adds a vehicle at `state` (its rear axle) on a track; returns its
+    /// slot. `occurrence`: on a track that drives its edge more than once
+    /// (see [`Piece::occurrence`]), the lap the vehicle is placed on, where
+    /// its controller's first projections start; None: the first.
     pub fn add_vehicle(
-        &mut self,
-        track_id: i64,
-        config: Option<ControllerConfig>,
-        params: Option<VehicleParams>,
-        body: Body,
-        state: VehicleState,
-    ) -> Result<usize, TrafficError> {
-        self.add_vehicle_at(track_id, config, params, body, state, None)
-    }
-
-    /// [`Self::add_vehicle`] on occurrence `occurrence` of its edge (see
-    /// [`Piece::occurrence`]): on a track that drives the edge more than
-    /// once, the vehicle is placed on that lap, and its controller's first
-    /// projections start there.
-    pub fn add_vehicle_at(
         &mut self,
         track_id: i64,
         config: Option<ControllerConfig>,
@@ -419,7 +407,7 @@ impl RouteFleet {
     }
 
     /// [`Self::retrack`] onto occurrence `occurrence` of the vehicle's edge
-    /// on the new track (see [`Self::add_vehicle_at`]).
+    /// on the new track (see [`Self::add_vehicle`]).
     pub fn retrack_at(
         &mut self,
         slot: i64,
@@ -628,7 +616,7 @@ mod tests {
         let (mut f, t) = fleet_on(road(None, true));
         let mut st = at(50.0, 0.0);
         st.theta_rad = 0.5;
-        let a = f.add_vehicle(t, None, None, body(), st).unwrap() as i64;
+        let a = f.add_vehicle(t, None, None, body(), st, None).unwrap() as i64;
         let want = 50.0 + 3.5 * 0.5f64.cos();
         assert!(
             (f.s_front(a).unwrap() - want).abs() < 1e-9,
@@ -649,7 +637,7 @@ mod tests {
         let (path, route) = road(None, true);
         let t = f.add_route(path, cfg, route).unwrap() as i64;
         let a = f
-            .add_vehicle(t, None, None, body(), at(10.0, 19.0))
+            .add_vehicle(t, None, None, body(), at(10.0, 19.0), None)
             .unwrap() as i64;
         let mut top: f64 = 0.0;
         for _ in 0..400 {
@@ -670,7 +658,7 @@ mod tests {
             )
             .unwrap() as i64;
         let a = f
-            .add_vehicle(t, None, None, body(), at(50.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;
         for _ in 0..5 {
             step(&mut f, &[a], false);
@@ -703,15 +691,15 @@ mod tests {
     fn bad_calls_are_errors_and_change_nothing() {
         let (mut f, t) = fleet_on(road(None, false));
         let a = f
-            .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+            .add_vehicle(t, None, None, body(), at(150.0, 8.0), None)
             .unwrap() as i64;
         assert_eq!(f.step(&[], DT), Err(TrafficError::NoPlan));
         assert!(matches!(
-            f.add_vehicle(t, None, None, body(), at(f64::NAN, 1.0)),
+            f.add_vehicle(t, None, None, body(), at(f64::NAN, 1.0), None),
             Err(TrafficError::Parameter { name: "x", .. })
         ));
         assert!(matches!(
-            f.add_vehicle(9, None, None, body(), at(0.0, 1.0)),
+            f.add_vehicle(9, None, None, body(), at(0.0, 1.0), None),
             Err(TrafficError::Fleet(FleetError::UnknownTrack { .. }))
         ));
         assert_eq!(
@@ -789,11 +777,14 @@ mod tests {
         // after one step; one more not yet known.
         let s: Vec<i64> = [30.0, 60.0, 90.0]
             .iter()
-            .map(|&x| f.add_vehicle(t, None, None, body(), at(x, 10.0)).unwrap() as i64)
+            .map(|&x| {
+                f.add_vehicle(t, None, None, body(), at(x, 10.0), None)
+                    .unwrap() as i64
+            })
             .collect();
         step(&mut f, &s, false);
         let late = f
-            .add_vehicle(t, None, None, body(), at(120.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(120.0, 10.0), None)
             .unwrap() as i64;
         let all = [s[0], s[1], s[2], late];
         assert_eq!(f.lanes_with_followers(&all).unwrap(), vec![10]);

@@ -221,13 +221,13 @@ mod tests {
     fn moves_follow_the_lane_when_centred_and_xy_otherwise() {
         let (mut f, t) = fleet_on(road(None, true));
         let a = f
-            .add_vehicle(t, None, None, body(), at(50.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;
         let mut off = at(50.0, 10.0);
         off.y_m = 2.0;
-        let b = f.add_vehicle(t, None, None, body(), off).unwrap() as i64;
+        let b = f.add_vehicle(t, None, None, body(), off, None).unwrap() as i64;
         let c = f
-            .add_vehicle(t, None, None, body(), at(594.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(594.0, 10.0), None)
             .unwrap() as i64;
         let (_, out) = step(&mut f, &[a, b, c], false);
         assert_eq!(out.moves, [Move::Lane, Move::Xy, Move::Speed]);
@@ -245,12 +245,12 @@ mod tests {
         assert_eq!(out.read_position, [false, true, true]);
         // On the junction lane (not plain) even a centred vehicle moves by (x, y).
         let d = f
-            .add_vehicle(t, None, None, body(), at(200.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(200.0, 10.0), None)
             .unwrap() as i64;
         assert_eq!(step(&mut f, &[d], false).1.moves, [Move::Xy]);
         // The scale maps arc length to lane position on lane 12.
         let e = f
-            .add_vehicle(t, None, None, body(), at(300.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(300.0, 10.0), None)
             .unwrap() as i64;
         let out = step(&mut f, &[e], false).1;
         let sf = f.s_front(e).unwrap();
@@ -261,7 +261,7 @@ mod tests {
     fn a_placement_never_goes_back_behind_where_the_simulator_has_the_vehicle() {
         let (mut f, t) = fleet_on(road(None, true));
         let a = f
-            .add_vehicle(t, None, None, body(), at(50.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;
         let sf = f.s_front(a).unwrap();
         let slots = [a];
@@ -305,7 +305,7 @@ mod tests {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         f.set_signal(0, &[Signal::Stop]).unwrap();
         let a = f
-            .add_vehicle(t, None, None, body(), at(180.0, 5.0))
+            .add_vehicle(t, None, None, body(), at(180.0, 5.0), None)
             .unwrap() as i64;
         for _ in 0..300 {
             step(&mut f, &[a], false);
@@ -327,7 +327,7 @@ mod tests {
     fn on_its_lane_a_vehicle_is_moved_by_its_speed_alone() {
         let (mut f, t) = fleet_on(road(None, true));
         let a = f
-            .add_vehicle(t, None, None, body(), at(20.0, 14.5))
+            .add_vehicle(t, None, None, body(), at(20.0, 14.5), None)
             .unwrap() as i64;
         let mut sim = Sim::on_lane_10();
         let mut read = true;
@@ -377,7 +377,7 @@ mod tests {
         route.pieces[1].offset_m = 0.02;
         let (mut f, t) = fleet_on((path, route));
         let a = f
-            .add_vehicle(t, None, None, body(), at(150.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(150.0, 10.0), None)
             .unwrap() as i64;
         let mut sim = Sim {
             lanes: vec![(10, 200.0), (11, 10.0), (12, 390.0 * 1.01)],
@@ -478,7 +478,9 @@ mod tests {
         // 0.02 exactly is a Speed move, the next double below it a Hold.
         let (f, a) = {
             let (mut f, t) = fleet_on(road(None, true));
-            let a = f.add_vehicle(t, None, None, body(), at(50.0, 0.0)).unwrap() as i64;
+            let a = f
+                .add_vehicle(t, None, None, body(), at(50.0, 0.0), None)
+                .unwrap() as i64;
             (f, a)
         };
         let mut d = f.driven(a).unwrap().clone();
@@ -512,7 +514,7 @@ mod tests {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         f.set_signal(0, &[Signal::Stop]).unwrap();
         let a = f
-            .add_vehicle(t, None, None, body(), at(150.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(150.0, 10.0), None)
             .unwrap() as i64;
         let mut sim = Sim::on_lane_10();
         let mut read = true;

@@ -381,7 +381,7 @@ mod tests {
     fn red_light_stops_the_vehicle_before_the_line_then_green_lets_it_go() {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         let slot = f
-            .add_vehicle(t, None, None, body(), at(100.0, 12.0))
+            .add_vehicle(t, None, None, body(), at(100.0, 12.0), None)
             .unwrap() as i64;
         f.set_signal(0, &[Signal::Stop]).unwrap();
         for _ in 0..400 {
@@ -424,7 +424,7 @@ mod tests {
         let (mut f, t) = fleet_on((path, route));
         f.set_signal(0, &[Signal::Stop]).unwrap();
         let slot = f
-            .add_vehicle(t, None, None, body(), at(150.0, 15.0))
+            .add_vehicle(t, None, None, body(), at(150.0, 15.0), None)
             .unwrap() as i64;
         for _ in 0..300 {
             let (_, out) = step(&mut f, &[slot], false);
@@ -441,7 +441,7 @@ mod tests {
     fn a_yellow_decision_holds_until_the_light_changes() {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         let slot = f
-            .add_vehicle(t, None, None, body(), at(120.0, 12.0))
+            .add_vehicle(t, None, None, body(), at(120.0, 12.0), None)
             .unwrap() as i64;
         f.set_signal(0, &[Signal::Yellow]).unwrap();
         for _ in 0..300 {
@@ -458,7 +458,7 @@ mod tests {
         // Close to the line at speed when it turns yellow: it goes through.
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         let slot = f
-            .add_vehicle(t, None, None, body(), at(200.0 - 3.5 - 4.0, 14.0))
+            .add_vehicle(t, None, None, body(), at(200.0 - 3.5 - 4.0, 14.0), None)
             .unwrap() as i64;
         f.set_signal(0, &[Signal::Yellow]).unwrap();
         for _ in 0..20 {
@@ -481,7 +481,7 @@ mod tests {
                     f.set_signal(0, &[Signal::Priority]).unwrap();
                 }
                 let slot = f
-                    .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+                    .add_vehicle(t, None, None, body(), at(150.0, 8.0), None)
                     .unwrap() as i64;
                 let mut asked = 0;
                 for _ in 0..300 {
@@ -506,7 +506,7 @@ mod tests {
         for must_yield in [true, false] {
             let (mut f, t) = fleet_on(road(None, false));
             let slot = f
-                .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+                .add_vehicle(t, None, None, body(), at(150.0, 8.0), None)
                 .unwrap() as i64;
             let mut asked = 0;
             for _ in 0..300 {
@@ -524,7 +524,7 @@ mod tests {
         // A major road never asks.
         let (mut f, t) = fleet_on(road(None, true));
         let slot = f
-            .add_vehicle(t, None, None, body(), at(150.0, 8.0))
+            .add_vehicle(t, None, None, body(), at(150.0, 8.0), None)
             .unwrap() as i64;
         for _ in 0..100 {
             assert!(step(&mut f, &[slot], true).0.is_empty());
@@ -536,7 +536,7 @@ mod tests {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         f.set_signal(0, &[Signal::Priority]).unwrap();
         let slot = f
-            .add_vehicle(t, None, None, body(), at(160.0, 8.0))
+            .add_vehicle(t, None, None, body(), at(160.0, 8.0), None)
             .unwrap() as i64;
         for _ in 0..300 {
             let sf = f.s_front(slot).unwrap();
@@ -562,7 +562,7 @@ mod tests {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         f.set_signal(0, &[Signal::Priority]).unwrap();
         let slot = f
-            .add_vehicle(t, None, None, body(), at(180.0, 3.0))
+            .add_vehicle(t, None, None, body(), at(180.0, 3.0), None)
             .unwrap() as i64;
         let mut closest = f64::INFINITY;
         for k in 0..200 {
@@ -581,10 +581,10 @@ mod tests {
     fn a_driven_leader_s_speed_comes_from_its_state() {
         let (mut f, t) = fleet_on(road(None, true));
         let lead = f
-            .add_vehicle(t, None, None, body(), at(60.0, 14.0))
+            .add_vehicle(t, None, None, body(), at(60.0, 14.0), None)
             .unwrap() as i64;
         let fol = f
-            .add_vehicle(t, None, None, body(), at(40.0, 14.0))
+            .add_vehicle(t, None, None, body(), at(40.0, 14.0), None)
             .unwrap() as i64;
         let accel = |f: &mut RouteFleet, leader_slot: i64| {
             let mut g = f.clone();
@@ -616,7 +616,7 @@ mod tests {
         };
         let (mut f, t) = fleet_with(road(None, true), settings);
         let a = f
-            .add_vehicle(t, None, None, body(), at(400.0, 15.0))
+            .add_vehicle(t, None, None, body(), at(400.0, 15.0), None)
             .unwrap() as i64;
         for _ in 0..400 {
             step(&mut f, &[a], false);
@@ -644,7 +644,9 @@ mod tests {
         let st = settings;
         for (x, planned) in [(402.0, true), (401.0, false), (450.0, true), (200.0, false)] {
             let (mut f, t) = fleet_with(road(None, true), settings);
-            let a = f.add_vehicle(t, None, None, body(), at(x, 15.0)).unwrap() as i64;
+            let a = f
+                .add_vehicle(t, None, None, body(), at(x, 15.0), None)
+                .unwrap() as i64;
             let sf = f.s_front(a).unwrap();
             plan_one(&mut f, a, (f64::NAN, f64::NAN), (-1, f64::NAN));
             let gap = f.plan.as_ref().unwrap().stop_gap[0];
@@ -680,7 +682,7 @@ mod tests {
         for (gap, speed) in [(20.0, 0.0), (25.0, 12.0), (40.0, 15.0)] {
             let (mut f, t) = fleet_with(road(None, true), one_control_step());
             let a = f
-                .add_vehicle(t, None, None, body(), at(50.0, 15.0))
+                .add_vehicle(t, None, None, body(), at(50.0, 15.0), None)
                 .unwrap() as i64;
             let cfg = f.fleet.vehicle_config(a).unwrap().clone();
             f.plan(&Observations {
@@ -726,7 +728,7 @@ mod tests {
         // the route's end at 600 m; the simulator takes the vehicle out there.
         let (mut f, t) = fleet_on(road(None, true));
         let a = f
-            .add_vehicle(t, None, None, body(), at(400.0, 15.0))
+            .add_vehicle(t, None, None, body(), at(400.0, 15.0), None)
             .unwrap() as i64;
         let mut slowest = f64::INFINITY;
         while f.s_front(a).unwrap() < 600.0 {

@@ -367,7 +367,7 @@ mod tests {
         let lap = f.route_of_track(t).unwrap().length_m / 3.0;
         for k in 0..3u32 {
             let a = f
-                .add_vehicle_at(t, None, None, body(), on_circle(0.5, 10.0), Some(k))
+                .add_vehicle(t, None, None, body(), on_circle(0.5, 10.0), Some(k))
                 .unwrap() as i64;
             for _ in 0..100 {
                 let out = step(&mut f, &[a], false).1;

@@ -95,7 +95,7 @@ mod tests {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         // Front 1.5 m before the line at 15 m/s: no law can stop that.
         let slot = f
-            .add_vehicle(t, None, None, body(), at(200.0 - 3.5 - 1.5, 15.0))
+            .add_vehicle(t, None, None, body(), at(200.0 - 3.5 - 1.5, 15.0), None)
             .unwrap() as i64;
         f.set_signal(0, &[Signal::Stop]).unwrap();
         let mut crossed = 0;
@@ -112,7 +112,7 @@ mod tests {
         let (mut f, t) = fleet_with(road(None, true), one_control_step());
         let mut s0 = at(50.0, 10.0);
         s0.y_m = 0.7;
-        let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
         let (mut sum_e, mut sum_e2, mut max_lat, mut dist) = (0.0, 0.0, 0.0_f64, 0.0);
         for _ in 0..50 {
             let out = step(&mut f, &[a], false).1;
@@ -148,7 +148,7 @@ mod tests {
         // and the sum of squared jerks over the 29 steps after the first.
         let (mut f, t) = fleet_with(road(None, true), one_control_step());
         let a = f
-            .add_vehicle(t, None, None, body(), at(50.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;
         let mut v0 = 10.0;
         let mut acc = Vec::new();
@@ -182,7 +182,7 @@ mod tests {
         let (mut f, t) = fleet_with(road(None, true), one_control_step());
         let mut s0 = at(50.0, 10.0);
         s0.theta_rad = 0.1;
-        let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
         step(&mut f, &[a], false);
         let s = f.remove_vehicle(a).unwrap().tracking;
         let front = 2.6 * 0.1_f64.sin();

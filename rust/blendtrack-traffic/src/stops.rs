@@ -101,7 +101,7 @@ mod tests {
             };
             let t = f.add_route(path, cfg, route).unwrap() as i64;
             let slot = f
-                .add_vehicle(t, None, None, body(), at(20.0, 12.0))
+                .add_vehicle(t, None, None, body(), at(20.0, 12.0), None)
                 .unwrap() as i64;
             f.set_halt(slot, 150.0).unwrap();
             let mut fastest_decel: f64 = 0.0;
@@ -145,7 +145,7 @@ mod tests {
         let (mut f, t) = fleet_on(road(Some((0, 0)), false));
         f.set_signal(0, &[Signal::Stop]).unwrap();
         let a = f
-            .add_vehicle(t, None, None, body(), at(20.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(20.0, 10.0), None)
             .unwrap() as i64;
         f.set_halt(a, 120.0).unwrap();
         let (sf, _) = run_to_rest(&mut f, a, 3000);
@@ -162,7 +162,7 @@ mod tests {
     fn a_retrack_clears_the_halt_and_bad_halts_are_errors() {
         let (mut f, t) = fleet_on(road(None, true));
         let a = f
-            .add_vehicle(t, None, None, body(), at(20.0, 10.0))
+            .add_vehicle(t, None, None, body(), at(20.0, 10.0), None)
             .unwrap() as i64;
         assert!(f.halt(a).unwrap().is_nan(), "none at first");
         for bad in [f64::INFINITY, f64::NEG_INFINITY] {
@@ -184,7 +184,7 @@ mod tests {
         // it has to stop at, and the front still rests at the halt.
         let (mut f, t) = fleet_on(road(None, true));
         let a = f
-            .add_vehicle(t, None, None, body(), at(100.0, 12.0))
+            .add_vehicle(t, None, None, body(), at(100.0, 12.0), None)
             .unwrap() as i64;
         f.set_halt(a, 100.0 + 3.5 + 20.0).unwrap();
         let (sf, _) = run_to_rest(&mut f, a, 3000);

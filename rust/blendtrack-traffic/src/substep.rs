@@ -363,7 +363,7 @@ mod tests {
         let mut s0 = at(50.0, 10.0);
         s0.y_m = 0.4;
         let (mut f, t) = fleet_with(road(None, true), settings(H));
-        let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
         let out = step_behind(&mut f, a, (f64::NAN, f64::NAN), 8.0 * H);
         let want = reference(s0, 8, |_, _| f64::NAN, f64::NAN);
         assert_eq!(f.state(a).unwrap(), want);
@@ -378,7 +378,7 @@ mod tests {
         // The same step at control_dt = dt is one step of the fleet over dt:
         // a different (coarser) state.
         let (mut g, t) = fleet_with(road(None, true), settings(8.0 * H));
-        let b = g.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        let b = g.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
         step_behind(&mut g, b, (f64::NAN, f64::NAN), 8.0 * H);
         assert_ne!(g.state(b).unwrap(), want);
         assert_eq!(g.stats(b).unwrap().tracking.steps, 1);
@@ -429,7 +429,7 @@ mod tests {
         let margin = TrafficSettings::default().standstill_margin_m;
         let (mut f, t) = fleet_with(road(None, true), settings(H));
         let a = f
-            .add_vehicle(t, None, None, body(), at(50.0, 15.0))
+            .add_vehicle(t, None, None, body(), at(50.0, 15.0), None)
             .unwrap() as i64;
         let out = step_behind(&mut f, a, (300.0, 10.0), 1.0);
         assert_eq!(f.state(a).unwrap().v_mps, 15.0);
@@ -444,7 +444,7 @@ mod tests {
         let s0 = at(50.0, 15.0);
         let g0 = 25.0;
         let (mut f, t) = fleet_with(road(None, true), settings(H));
-        let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+        let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
         let out = step_behind(&mut f, a, (g0, 10.0), 1.0);
         let held = |k: usize, x: f64| g0 - margin + 10.0 * k as f64 * H - (x - s0.x_m);
         let want = reference(s0, 20, held, 10.0);
@@ -468,7 +468,7 @@ mod tests {
     fn at_one_second_steps_a_red_light_still_stops_the_vehicle_before_its_line() {
         let (mut f, t) = fleet_with(road(Some((0, 0)), false), settings(H));
         let slot = f
-            .add_vehicle(t, None, None, body(), at(100.0, 12.0))
+            .add_vehicle(t, None, None, body(), at(100.0, 12.0), None)
             .unwrap() as i64;
         f.set_signal(0, &[Signal::Stop]).unwrap();
         for _ in 0..40 {
@@ -489,7 +489,7 @@ mod tests {
             let (mut f, t) = fleet_with(road(None, true), settings(control_dt));
             let mut s0 = at(20.0, 12.0);
             s0.y_m = 0.5;
-            let a = f.add_vehicle(t, None, None, body(), s0).unwrap() as i64;
+            let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
             for _ in 0..(10.0 / dt).round() as usize {
                 step_behind(&mut f, a, (f64::NAN, f64::NAN), dt);
             }
@@ -514,7 +514,7 @@ mod tests {
         // measured, the 31 after it (the simulator would have taken it out) not.
         let (mut f, t) = fleet_with(road(None, true), settings(H));
         let a = f
-            .add_vehicle(t, None, None, body(), at(560.0, 15.0))
+            .add_vehicle(t, None, None, body(), at(560.0, 15.0), None)
             .unwrap() as i64;
         for _ in 0..4 {
             step_behind(&mut f, a, (f64::NAN, f64::NAN), 1.0);
@@ -524,7 +524,7 @@ mod tests {
         // One control step per step takes every step, as before.
         let (mut f, t) = fleet_with(road(None, true), settings(1.0));
         let a = f
-            .add_vehicle(t, None, None, body(), at(560.0, 15.0))
+            .add_vehicle(t, None, None, body(), at(560.0, 15.0), None)
             .unwrap() as i64;
         for _ in 0..4 {
             step_behind(&mut f, a, (f64::NAN, f64::NAN), 1.0);

@@ -186,7 +186,9 @@ pub(crate) fn sim_step(f: &mut RouteFleet, slot: i64, sim: &mut Sim, report: boo
 /// steps into a simulator that reports every step: its place is known.
 pub(crate) fn settled_on_lane_10(x: f64, v: f64) -> (RouteFleet, i64, Sim) {
     let (mut f, t) = fleet_on(road(None, true));
-    let a = f.add_vehicle(t, None, None, body(), at(x, v)).unwrap() as i64;
+    let a = f
+        .add_vehicle(t, None, None, body(), at(x, v), None)
+        .unwrap() as i64;
     let mut sim = Sim::on_lane_10();
     for _ in 0..5 {
         sim_step(&mut f, a, &mut sim, true);
