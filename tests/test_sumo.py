@@ -76,6 +76,11 @@ def rural(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, sumo.RunResul
     return _shipped_run(tmp_path_factory, "rural_loop", end_s=300, fcd=True)
 
 
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, sumo.RunResult]:
+    return _shipped_run(tmp_path_factory, "urban_grid", end_s=300, trace=True)
+
+
 def test_rural_loop_tracks_lanes_within_comfort(rural: tuple[Path, sumo.RunResult]) -> None:
     out, result = rural
     rows = _read_vehicles(out)
@@ -184,11 +189,6 @@ def test_axle_errors_are_reported_at_fixed_points(tmp_path: Path) -> None:
             other = "rear" if axle == "front" else "front"
             assert e_p == pytest.approx(e_axle, rel=1e-9, abs=1e-12), (r["id"], e_p, e_axle)
             assert float(r[f"lateral_error_{other}_axle_mean_abs_m"]) != pytest.approx(e_p, rel=1e-3), r["id"]
-
-
-@pytest.fixture(scope="module")
-def grid(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, sumo.RunResult]:
-    return _shipped_run(tmp_path_factory, "urban_grid", end_s=300, trace=True)
 
 
 def test_grid_stops_for_red_lights_and_follows_leaders(grid: tuple[Path, sumo.RunResult]) -> None:
