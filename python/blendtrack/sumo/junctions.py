@@ -216,7 +216,7 @@ class Junctions:
             for other in self.conn.vehicles_on(lane):
                 if other == vid:
                     continue
-                if False and same and float(veh.getSpeed(other)) >= HALT_SPEED_MPS \
+                if same and float(veh.getSpeed(other)) >= HALT_SPEED_MPS \
                         and float(veh.getLanePosition(other)) >= float(veh.getLength(other)):
                     continue
                 body, half = body_segment(veh, other)
