@@ -112,14 +112,13 @@ class Selection:
         # model.
         if "max_obs_deceleration" not in self.opt.fixed_keys and "max_obs_deceleration" not in overrides:
             overrides["max_obs_deceleration"] = overrides.get("max_deceleration", self.base_config.max_deceleration)
-        # preferred_acceleration: the vType's accel (SUMO's passenger car: 2.6
-        # m/s^2), unless set explicitly. At the paper's 1 m/s^2 (a 3 m/s test
-        # vehicle) a queue left a green light at half the pace of SUMO's
-        # drivers: on Bologna 30 % controlled, 176 of the 244 vehicles that
-        # arrive under plain SUMO arrived, against 190 with the vType's.
-        accel = float(vt.getAccel(vtype))
-        if "preferred_acceleration" not in self.opt.fixed_keys and "preferred_acceleration" not in overrides and accel > 0:
-            overrides["preferred_acceleration"] = accel
+        # preferred_acceleration keeps the paper's 1 m/s^2 unless set (a
+        # blendtrack.preferred_acceleration vType param, or --config). With the
+        # vType's accel (2.6 m/s^2 for SUMO's passenger car) queues left lights
+        # faster (Bologna, seed 0: 0.79 of plain SUMO's arrivals) but seed 1
+        # had 4 collisions with controlled vehicles where 1 m/s^2 had none;
+        # earlier the all-controlled grid had 3 junction collisions in 300 s
+        # with it.
         try:
             cfg = self.base_config.replace(**overrides) if overrides else self.base_config
             veh = self.base_vehicle.replace(**vehicle_overrides) if vehicle_overrides else self.base_vehicle
