@@ -131,7 +131,7 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
     let (v, dt_s, sf_new) = (m.v_mps, m.dt_s, m.s_front_m);
     // Where the front must be on the piece's lane after the
     // simulator's own movement over the step.
-    let target = piece.lane_pos_start_m + (sf_new - piece.start_m) * piece.scale;
+    let target = piece.lane_pos_at(sf_new);
     let mut p = Placement {
         mv: Move::Xy,
         pos: target - v * dt_s,

@@ -35,6 +35,15 @@ pub struct Piece {
     pub occurrence: u32,
 }
 
+impl Piece {
+    /// The simulator's lane position of arc length `s`, at the piece's scale
+    /// (not clamped to the piece or the lane).
+    #[inline]
+    pub fn lane_pos_at(&self, s: f64) -> f64 {
+        self.lane_pos_start_m + (s - self.start_m) * self.scale
+    }
+}
+
 /// A junction entry along a route's track.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StopLine {
@@ -208,8 +217,7 @@ impl Route {
     /// piece holding `s`, the position clamped to the lane.
     pub fn lane_position(&self, s: f64) -> (u32, f64) {
         let p = &self.pieces[self.piece_at(s)];
-        let pos = p.lane_pos_start_m + (s - p.start_m) * p.scale;
-        (p.lane, pos.max(0.0).min(p.lane_length_m))
+        (p.lane, p.lane_pos_at(s).max(0.0).min(p.lane_length_m))
     }
 
     /// The arc length of lane position `pos` on lane `lane`: on the first
@@ -223,7 +231,7 @@ impl Route {
                 return None;
             }
             let end = self.pieces.get(k + 1).map_or(self.length_m, |q| q.start_m);
-            let last = p.lane_pos_start_m + (end - p.start_m) * p.scale;
+            let last = p.lane_pos_at(end);
             let on = p.lane_pos_start_m - TOL_M <= pos && pos <= last + TOL_M;
             let s = p.start_m + (pos - p.lane_pos_start_m) / p.scale;
             (on && s >= s_from).then_some(s)

@@ -201,7 +201,7 @@ pub(crate) fn front_lane_pos(f: &RouteFleet, slot: i64) -> (u32, f64) {
     let sf = f.s_front(slot).unwrap();
     let d = f.driven(slot).unwrap();
     let p = d.route.pieces[d.route.piece_at(sf)];
-    (p.lane, p.lane_pos_start_m + (sf - p.start_m) * p.scale)
+    (p.lane, p.lane_pos_at(sf))
 }
 
 /// A circle of radius `LAP_RADIUS_M` driven three times (an open path of
