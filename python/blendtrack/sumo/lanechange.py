@@ -195,8 +195,7 @@ class LaneChanges:
             # on the target lane while the vehicle stood. Check again.
             speed = float(v.getSpeed(act.vid))
             length = change_length(speed, math.inf)
-            duration = change_duration(speed, length, self.plan_accel)
-            if not self.target_lane_clear(act.vid, direction, length / duration, duration):
+            if not self.room_for_change(act.vid, direction, speed, length):
                 self.abort_change(act)
                 return lead
         if self.left_behind(act, lead):
@@ -264,8 +263,7 @@ class LaneChanges:
         # not react to it before: start only with room for the whole change
         # (what the follower closes in while the vehicle covers the change's
         # length, pulling away from its present speed) plus a margin.
-        duration = change_duration(speed, length, self.plan_accel)
-        if not self.target_lane_clear(act.vid, direction, length / duration, duration):
+        if not self.room_for_change(act.vid, direction, speed, length):
             self.wait_for_gap(act.vid, direction, target_lane, pos, speed)
             return
         geo2, track = self.tracks.geometry(geo.edges[k_edge:], current, change=(pos, length))
@@ -392,6 +390,13 @@ class LaneChanges:
             any(gap < LANE_CHANGE_GAP_M + duration * max(f_speed - speed, 0.0) for gap, f_speed in followers)
             or any(gap < LANE_CHANGE_GAP_M + duration * max(speed - l_speed, 0.0) for gap, l_speed in leaders)
         )
+
+    def room_for_change(self, vid: str, direction: int, speed: float, length: float) -> bool:
+        """``target_lane_clear`` for a change the route needs, of ``length``
+        m from ``speed`` m/s: it lasts ``change_duration`` at the planning
+        acceleration, at the mean speed that covers the length in that time."""
+        duration = change_duration(speed, length, self.plan_accel)
+        return self.target_lane_clear(vid, direction, length / duration, duration)
 
     def tactical_room(self, vid: str, direction: int, speed: float, factor: float, near: Neighbours | None = None) -> bool:
         """Gaps on the target lane for a change that is only wanted (see
