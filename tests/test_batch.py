@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -22,6 +23,8 @@ import psutil
 import pytest
 
 from blendtrack.batch import SweepError, load_sweep
+
+SCENARIOS = Path(__file__).resolve().parents[1] / "sumo_scenarios"
 
 CHILD = "blendtrack.batch._child"
 
@@ -362,17 +365,24 @@ def test_a_worker_process_that_dies_is_recorded_and_resume_runs_it_again(tmp_pat
 
 
 def test_sumo_runs_in_a_worker_and_a_run_over_its_time_limit_is_killed(tmp_path: Path) -> None:
-    # The ring's vehicles never leave (their routes repeat for ~16,800 s of
-    # driving), so "20000 s" runs until it is killed, far past the limit on
-    # any machine; "10 s" is SUMO's start and 100 steps, a few seconds even on
-    # a loaded machine. The limit sits between the two with room both ways
-    # (a 12 s limit on the grid was missed by a 20 s run under load).
-    sweep = _sweep(tmp_path, 'kind = "sumo"\nscenarios = ["ring_single_lane"]\ntimeout_s = 40\n[grid]\nend = [10, 20000]\n')
+    # A copy of the ring whose routes repeat 600 times (about 52,000 s of
+    # driving, over 2 minutes even at the ~420x real time the CI machine ran
+    # the shipped ring's 194 laps, which it finished within the 40 s limit),
+    # so "1000000 s" runs until it is killed. "10 s" is SUMO's start, the
+    # long route's track and 100 steps: a few seconds even on a loaded
+    # machine. The limit sits between the two with room both ways.
+    ring = tmp_path / "ring_forever"
+    shutil.copytree(SCENARIOS / "ring_single_lane", ring)
+    routes = ring / "ring_single_lane.rou.xml"
+    text = routes.read_text()
+    assert text.count('repeat="194"') == 2
+    routes.write_text(text.replace('repeat="194"', 'repeat="600"'))
+    sweep = _sweep(tmp_path, 'kind = "sumo"\nscenarios = ["ring_forever"]\ntimeout_s = 40\n[grid]\nend = [10, 1000000]\n')
     out = tmp_path / "out"
     r = _cli("batch", str(sweep), "--workers", "2", "--out", str(out))
     assert r.returncode == 1, r.stderr
     recs = {rec["params"]["end"]: rec for rec in _records(out).values()}
-    short, long_ = recs[10.0], recs[20000.0]
+    short, long_ = recs[10.0], recs[1000000.0]
     assert short["status"] == "ok", short["error"]
     assert short["metrics"]["controlled_vehicles"] >= 1
     # Within its lane: the ring's lane is 3.5 m wide and the vehicle 1.8 m
