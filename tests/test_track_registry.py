@@ -1,6 +1,7 @@
 """The registries a long run keeps bounded (issue 22): RouteFleet hands a
-removed track's id out again, and the SUMO bridge keeps the shared tracks
-driven plus at most IDLE_TRACKS others."""
+removed track's id out again, the SUMO bridge keeps the shared tracks
+driven plus at most IDLE_TRACKS others, each for at most IDLE_TRACK_S, and a
+vehicle's own lane-change track goes once it has left the change's edge."""
 
 from __future__ import annotations
 
@@ -11,9 +12,10 @@ import numpy as np
 import blendtrack
 from blendtrack import ControllerConfig, RouteFleet
 from blendtrack.sumo.network import Network
-from blendtrack.sumo.tracks import IDLE_TRACKS, Tracks
+from blendtrack.sumo.tracks import IDLE_TRACK_S, IDLE_TRACKS, Tracks
 
-GRID_NET = Path(__file__).resolve().parents[1] / "sumo_scenarios" / "urban_grid" / "urban_grid.net.xml"
+ROOT = Path(__file__).resolve().parents[1]
+GRID_NET = ROOT / "sumo_scenarios" / "urban_grid" / "urban_grid.net.xml"
 
 
 def _route(f: RouteFleet, length: float) -> int:
@@ -70,3 +72,70 @@ def test_shared_tracks_nobody_drives_are_bounded() -> None:
     tracks.leave(driven)
     assert len(tracks.geo_cache) == fleet.n_tracks == IDLE_TRACKS
     assert fleet.track_capacity <= IDLE_TRACKS + 2
+
+
+def test_idle_shared_tracks_expire_after_idle_track_s() -> None:
+    fleet = RouteFleet()
+    tracks = Tracks(fleet, Network(GRID_NET), ControllerConfig(), 0.0)
+    edges = sorted(e.getID() for e in tracks.network.net().getEdges())
+    tracks.expire(10.0)
+    _, early = tracks.geometry((edges[0],), 0)  # idle from t = 10 s
+    tracks.expire(50.0)
+    _, later = tracks.geometry((edges[1],), 0)  # idle from t = 50 s
+    _, driven = tracks.geometry((edges[2],), 0)
+    tracks.enter(driven)
+    tracks.expire(10.0 + IDLE_TRACK_S)
+    assert fleet.n_tracks == 3, "idle for exactly IDLE_TRACK_S: still kept"
+    tracks.expire(10.0 + IDLE_TRACK_S + 1.0)
+    assert ((edges[0],), 0) not in tracks.geo_cache and fleet.n_tracks == 2
+    tracks.expire(10.0 * IDLE_TRACK_S)
+    # The later idle one goes too; the driven one stays however long it is driven.
+    assert list(tracks.geo_cache) == [((edges[2],), 0)] and fleet.n_tracks == 1
+    assert tracks.geometry((edges[2],), 0)[1] == driven
+    # Left at 10 IDLE_TRACK_S, it goes IDLE_TRACK_S later.
+    tracks.leave(driven)
+    tracks.expire(11.0 * IDLE_TRACK_S - 1.0)
+    assert fleet.n_tracks == 1
+    tracks.expire(11.0 * IDLE_TRACK_S + 1.0)
+    assert fleet.n_tracks == 0 and not tracks.geo_cache
+
+
+def test_a_vehicle_leaves_its_lane_change_track_on_the_next_edge(tmp_path: Path) -> None:
+    # The highway's merge, every vehicle controlled: merging vehicles change
+    # lanes on a track of their own. Once a vehicle is on a normal lane of
+    # another edge and no longer changing, it is back on the shared track of
+    # its route from that lane within ROUTE_CHECK_EVERY steps (the check is
+    # staggered over the vehicles), its own track freed.
+    from blendtrack import sumo
+    from blendtrack.sumo.runner import ROUTE_CHECK_EVERY, SumoRun
+
+    scenario = sumo.resolve_scenario(str(ROOT / "sumo_scenarios" / "highway_onramp"))
+    run = SumoRun(scenario, sumo.RunOptions(controlled_fraction=1.0, end_s=150.0, progress=False,
+                                            sumo_args=("--no-warnings", "true")), tmp_path / "o")
+    overdue: dict[str, int] = {}
+    worst = {"steps": 0, "own_tracks": 0, "released": 0}
+    owned_before: set[str] = set()
+
+    def watch(r: SumoRun, t: float) -> None:
+        owned = set()
+        for vid, act in r.vehicles.active.items():
+            if act.own_track is None:
+                continue
+            owned.add(vid)
+            lane = r.tracks.lanes.names[r.fleet.front_lane_position(act.slot)[0]]
+            if act.changing is None and not lane.startswith(":") and lane.rpartition("_")[0] != act.geo.edges[0]:
+                overdue[vid] = overdue.get(vid, 0) + 1
+                worst["steps"] = max(worst["steps"], overdue[vid])
+            else:
+                overdue.pop(vid, None)
+        worst["own_tracks"] = max(worst["own_tracks"], len(owned))
+        worst["released"] += len({v for v in owned_before - owned if v in r.vehicles.active})
+        owned_before.clear()
+        owned_before.update(owned)
+
+    run.step_hooks.append(watch)
+    result = run.run()
+    assert result.summary["controlled_vehicles"] > 50 and worst["own_tracks"] > 0, "lane changes on own tracks happened"
+    assert worst["released"] > 0, "vehicles went back to shared tracks while still driving"
+    # One step for the hook seeing the state before the control step, and the stagger.
+    assert worst["steps"] <= ROUTE_CHECK_EVERY + 1

@@ -22,6 +22,11 @@ from blendtrack.sumo.records import VehicleRecord
 #: run's track registry stays bounded by the tracks driven at once plus
 #: this, and a route driven now and then is not rebuilt for each vehicle.
 IDLE_TRACKS = 64
+#: ... and for at most this long (simulated s) since their last vehicle left:
+#: a track of a few km holds about 0.6 MB (its points, widths, corridor and
+#: curve profile in Rust, the geometry in Python), so a day's morning peak
+#: would otherwise leave its tracks held through the night (issue 22).
+IDLE_TRACK_S = 120.0
 
 _Key = tuple[tuple[str, ...], int]
 
@@ -91,8 +96,11 @@ class Tracks:
         #: Shared track -> its key in geo_cache, and the vehicles on it.
         self._key: dict[int, _Key] = {}
         self._users: dict[int, int] = {}
-        #: The keys of the shared tracks nobody drives, the one left longest ago first.
-        self._idle: OrderedDict[_Key, None] = OrderedDict()
+        #: The keys of the shared tracks nobody drives, the one left longest
+        #: ago first, with the simulated time it was left.
+        self._idle: OrderedDict[_Key, float] = OrderedDict()
+        #: The simulated time (``expire`` keeps it).
+        self.now = 0.0
         self.lanes = Interned()
         self.edges = Interned()
         self.lights = Interned()
@@ -147,7 +155,7 @@ class Tracks:
             if change is None:
                 self.geo_cache[key] = hit
                 self._key[track] = key
-                self._idle[key] = None
+                self._idle[key] = self.now
                 self._trim()
         return hit
 
@@ -168,15 +176,37 @@ class Tracks:
         if n:
             self._users[track] = n
         else:
-            self._idle[key] = None
+            self._idle[key] = self.now
             self._trim()
+
+    def expire(self, t: float) -> None:
+        """At simulated time ``t``: the shared tracks nobody has driven for
+        ``IDLE_TRACK_S`` go."""
+        self.now = t
+        idle = self._idle
+        while idle and next(iter(idle.values())) < t - IDLE_TRACK_S:
+            self._evict(idle.popitem(last=False)[0])
 
     def _trim(self) -> None:
         while len(self._idle) > IDLE_TRACKS:
-            key, _ = self._idle.popitem(last=False)
-            _, track = self.geo_cache.pop(key)
-            del self._key[track]
-            self.fleet.remove_route(track)
+            self._evict(self._idle.popitem(last=False)[0])
+
+    def _evict(self, key: _Key) -> None:
+        _, track = self.geo_cache.pop(key)
+        del self._key[track]
+        self.fleet.remove_route(track)
+
+    def past_own_track(self, act: Active) -> bool:
+        """Has ``act``, on a track of its own (a lane change in it) and no
+        longer changing lanes, left the edge the change was on for a normal
+        lane? From there on its own track is the lane's centreline, as the
+        shared track of its route from that lane is: it can go back to that
+        one (``rebuild``), and its own, about 0.6 MB for a few km of route,
+        is freed then instead of when the vehicle arrives (issue 22)."""
+        if act.own_track is None or act.changing is not None:
+            return False
+        lane = self.lanes.names[self.fleet.front_lane_position(act.slot)[0]]
+        return not lane.startswith(":") and lane.rpartition("_")[0] != act.geo.edges[0]
 
     def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool, base: int, route_index: int | None = None) -> None:
         """Puts ``act`` on ``track`` (``owned``: built for it alone), whose
