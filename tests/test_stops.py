@@ -195,3 +195,61 @@ def test_a_parking_area_is_served_and_an_unmet_trigger_holds_as_in_sumo(runs: tu
     assert (trig["end_reason"], trig["stops_served"], trig["stops_skipped"]) == ("end", "0", "0")
     arrived = {t.get("id") for t in ET.parse(ctrl / "sumo" / "tripinfo.xml").getroot().iter("tripinfo")}
     assert "trig" not in arrived and {"bus", "car", "odd", "park"} <= arrived
+
+
+QUEUE_ADDITIONAL = """<additional>
+  <busStop id="bs" lane="AB_0" startPos="110" endPos="170"/>
+</additional>"""
+# Two buses at one bus stop: "first" halts at its end for 10 s, "second"
+# behind it (SUMO starts its stop there, short of the end) for 30 s, so it
+# still dwells after "first" has left; a car follows on the same lane.
+QUEUE_ROUTES = """<routes>
+  <vType id="bus" vClass="bus" length="12" minGap="3" accel="2.6" decel="4.5" sigma="0"/>
+  <vType id="car" length="5" minGap="2.5" accel="2.6" decel="4.5" sigma="0"/>
+  <vehicle id="first" type="bus" depart="0" departLane="0" departSpeed="max">
+    <route edges="AB BC"/><stop busStop="bs" duration="10"/>
+  </vehicle>
+  <vehicle id="second" type="bus" depart="3" departLane="0" departSpeed="max">
+    <route edges="AB BC"/><stop busStop="bs" duration="30"/>
+  </vehicle>
+  <vehicle id="car" type="car" depart="25" departLane="0" departSpeed="max"><route edges="AB BC"/></vehicle>
+</routes>"""
+
+
+def test_a_bus_dwelling_short_of_the_stop_end_stands_where_sumo_holds_it(tmp_path: Path) -> None:
+    folder = tmp_path / "queue"
+    cfg = _scenario(folder, "")
+    (folder / "s.add.xml").write_text(QUEUE_ADDITIONAL)
+    (folder / "r.rou.xml").write_text(QUEUE_ROUTES)
+    stop_out = tmp_path / "stopout.xml"
+    run = SumoRun(sumo.resolve_scenario(str(cfg)),
+                  RunOptions(end_s=120, progress=False, controlled_fraction=1.0, sumo_args=("--stop-output", str(stop_out))),
+                  tmp_path / "o")
+    # While SUMO has "second" stopped: blendtrack's front against SUMO's,
+    # and whether "first" has left the bus stop's lane by then.
+    seen = {"worst_m": 0.0, "dwell_steps_after_first_left": 0}
+
+    def watch(r: SumoRun, t: float) -> None:
+        v = r.conn.sumo.vehicle
+        act = r.active.get("second")
+        if act is None or "second" not in v.getIDList() or not v.isStopped("second"):
+            return
+        lane, pos = r.fleet.front_lane_position(act.slot)
+        assert r.tracks.lanes.names[lane] == v.getLaneID("second")
+        seen["worst_m"] = max(seen["worst_m"], abs(pos - float(v.getLanePosition("second"))))
+        if "first" not in v.getIDList() or v.getLaneID("first") != "AB_0":
+            seen["dwell_steps_after_first_left"] += 1
+
+    run.step_hooks.append(watch)
+    result = run.run()
+    # At a standstill blendtrack's front and SUMO's agree (within the halt's creep).
+    assert seen["worst_m"] < 0.3, f"blendtrack's front {seen['worst_m']:.2f} m from SUMO's while SUMO held the bus"
+    stops = _stopinfos(stop_out)
+    (first,), (second,) = stops["first"], stops["second"]
+    # SUMO started "second"'s stop behind "first", well short of the end.
+    assert float(second["pos"]) < 170.0 - 12.0
+    assert abs(float(second["ended"]) - float(second["started"]) - 30.0) <= DT
+    assert seen["dwell_steps_after_first_left"] >= 5, "the case: still dwelling after the bus ahead left"
+    recs = {r.vid: r for r in result.records}
+    assert {k: recs[k].collisions for k in recs} == {"first": 0, "second": 0, "car": 0}
+    assert (recs["second"].stops_served, recs["second"].reason) == (1, "arrived")

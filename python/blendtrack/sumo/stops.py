@@ -20,7 +20,9 @@ set, for ``duration``, until ``until``, or until its person or container
 trigger is met, exactly as for its own drivers (a trigger that is never met
 holds the vehicle for good, as in SUMO). While SUMO says the vehicle is
 stopped the halt stays; once SUMO ends the stop the halt goes, the stop
-counts as served, and the vehicle drives on to the next one.
+counts as served, and the vehicle drives on to the next one. Where SUMO
+starts the stop short of its end (behind another vehicle in a bus stop), the
+halt moves to where the vehicle stands for the dwell.
 
 A stop the vehicle cannot serve is skipped, counted with its reason, and
 removed from SUMO's schedule (``replaceStop`` with an empty edge), so that
@@ -174,7 +176,17 @@ class Stops:
             p.dwelling, p.key = False, None
             self._clear(p)
         if stopped:
-            p.dwelling = True
+            if not p.dwelling or math.isnan(self.fleet.halt(p.act.slot)):
+                # SUMO starts a stop wherever the vehicle halts within its
+                # range: behind another bus at a bus stop, short of the end.
+                # The halt moves to where the front stands, so blendtrack's
+                # vehicle stands there with SUMO's until the dwell ends. Left
+                # at the stop's end (or cleared by a retrack), it drove on
+                # toward the end once the bus ahead had left while SUMO held
+                # the bus, and the car behind, which judged its gap from
+                # blendtrack's place, ran into the bus (Bologna, seed 2).
+                self.fleet.set_halt(p.act.slot, self.fleet.s_front(p.act.slot) - AIM_SHORT_M)
+                p.dwelling = True
             return
         nxt = v.getStops(vid, 1)
         if not nxt:
