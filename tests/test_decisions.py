@@ -670,3 +670,35 @@ def test_a_barely_started_lane_change_is_given_up_when_its_room_goes(monkeypatch
         conn.vehicle.neighbours = {("me", 0): [("f", gap)]}
         lcs.changing_leader(act, None)
         assert aborted == (["me"] if gives_up else []), (gap, lat)
+
+
+def test_a_leader_on_the_tracks_way_is_taken_when_sumo_has_the_vehicle_beside_it() -> None:
+    # Junction edge ":j_0" has lanes ":j_0_0" and ":j_0_1"; the track drives
+    # ":j_0_1" (20 m) into "out_1". SUMO has the vehicle on ":j_0_0" at 8 m
+    # (moveToXY's choice for the step), where getLeader looks along the other
+    # connection and finds a vehicle 25.9 m on; on the track's own way a
+    # vehicle stands on "out_1" with its back at 6 - 4.5 = 1.5 m: the gap as
+    # getLeader gives it is (20 - 8) + 1.5 - minGap 2.5 = 11 m.
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane=":j_0_0", pos=8.0, speed=7.0)
+    v.add("other", lane=":j_0_1", pos=3.0, speed=7.0)  # behind "me" on the track's lane: not ahead
+    v.add("ahead", lane="out_1", pos=6.0, speed=0.0)
+    v.cars["ahead"]["length"] = 4.5
+    v.cars["me"]["min_gap"] = 2.5
+    conn.lanes = {":j_0_1": ["other"], "out_1": ["ahead"]}
+    conn.get_lane_id = lambda vid: v.cars[vid]["lane"]  # type: ignore[attr-defined]
+    conn.get_lane_pos = lambda vid: v.cars[vid]["pos"]  # type: ignore[attr-defined]
+    after = {":j_0_1": [(":j_0_1", 20.0), ("out_1", 100.0)]}
+    j = Junctions(conn, SimpleNamespace(lanes_after=lambda via: after.get(via, [])), None, None, 4.0)  # type: ignore[arg-type]
+    track = ["in_1", ":j_0_1", "out_1"]
+    far = ("elsewhere", 25.9)
+    assert j.leader_on_track("me", track, far) == ("ahead", pytest.approx(11.0))
+    # A nearer leader from SUMO stays.
+    assert j.leader_on_track("me", track, ("close", 4.0)) == ("close", 4.0)
+    # On the track's own lane, SUMO's answer stands as it is.
+    v.cars["me"]["lane"] = ":j_0_1"
+    assert j.leader_on_track("me", track, far) == far
+    # On a normal lane too.
+    v.cars["me"]["lane"] = "in_1"
+    assert j.leader_on_track("me", track, far) == far

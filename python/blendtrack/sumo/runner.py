@@ -429,9 +429,12 @@ class SumoRun:
         ask = fleet.leaders_on_lanes(self.vehicles.slots, lanes, [lane_vehicles(names[lane]) for lane in lanes]).tolist()
         get_leader = self.conn.get_leader
         leaders = [get_leader(ids[i], LEADER_RANGE_M) for i in ask]
+        order, junctions = self.vehicles.order, self.junctions
         for k, i in enumerate(ask):
             if not leaders[k] or not leaders[k][0]:
-                leaders[k] = self.junctions.leader_beyond(ids[i], self.vehicles.order[i].geo.piece_lane)
+                leaders[k] = junctions.leader_beyond(ids[i], order[i].geo.piece_lane)
+            else:
+                leaders[k] = junctions.leader_on_track(ids[i], order[i].geo.piece_lane, leaders[k])
         return ask, self.sumo_leaders.correct(leaders)
 
     def _observe_subscribed(self, t: float) -> _Observed:
