@@ -12,7 +12,7 @@ import numpy as np
 import blendtrack
 from blendtrack import ControllerConfig, RouteFleet
 from blendtrack.sumo.network import Network
-from blendtrack.sumo.tracks import IDLE_TRACK_S, IDLE_TRACKS, Tracks
+from blendtrack.sumo.tracks import IDLE_TRACK_S, IDLE_TRACKS, SHARE_AFTER_M, Tracks
 
 ROOT = Path(__file__).resolve().parents[1]
 GRID_NET = ROOT / "sumo_scenarios" / "urban_grid" / "urban_grid.net.xml"
@@ -102,8 +102,8 @@ def test_idle_shared_tracks_expire_after_idle_track_s() -> None:
 
 def test_a_vehicle_leaves_its_lane_change_track_on_the_next_edge(tmp_path: Path) -> None:
     # The highway's merge, every vehicle controlled: merging vehicles change
-    # lanes on a track of their own. Once a vehicle is on a normal lane of
-    # another edge and no longer changing, it is back on the shared track of
+    # lanes on a track of their own. Once a vehicle is SHARE_AFTER_M into a
+    # normal lane of another edge and no longer changing, it is back on the shared track of
     # its route from that lane within ROUTE_CHECK_EVERY steps (the check is
     # staggered over the vehicles), its own track freed.
     from blendtrack import sumo
@@ -122,8 +122,10 @@ def test_a_vehicle_leaves_its_lane_change_track_on_the_next_edge(tmp_path: Path)
             if act.own_track is None:
                 continue
             owned.add(vid)
-            lane = r.tracks.lanes.names[r.fleet.front_lane_position(act.slot)[0]]
-            if act.changing is None and not lane.startswith(":") and lane.rpartition("_")[0] != act.geo.edges[0]:
+            lane_id, pos = r.fleet.front_lane_position(act.slot)
+            lane = r.tracks.lanes.names[lane_id]
+            past = act.changing is None and not lane.startswith(":") and lane.rpartition("_")[0] != act.geo.edges[0]
+            if past and pos >= SHARE_AFTER_M:
                 overdue[vid] = overdue.get(vid, 0) + 1
                 worst["steps"] = max(worst["steps"], overdue[vid])
             else:

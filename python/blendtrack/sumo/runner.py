@@ -384,12 +384,12 @@ class SumoRun:
             self.vehicles.refresh_order()
             asked, leaders = self._leaders()
         get_route = conn.get_route_id
-        past_own = self.tracks.past_own_track
+        leave_own = self.tracks.leave_own_track
         for act in self.vehicles.order[self._steps % ROUTE_CHECK_EVERY :: ROUTE_CHECK_EVERY]:
             if get_route(act.vid) != act.route_id:
                 self._rebuild(act)
-            elif past_own(act):
-                self.tracks.rebuild(act, conn.sumo.vehicle)
+            else:
+                leave_own(act)
         index, lane_id = self.vehicles.index, self.tracks.lanes.id
         get_lane, get_pos = conn.get_lane_id, conn.get_lane_pos
         read = [(i, vid) for vid in self.vehicles.read_position if (i := index.get(vid)) is not None]
@@ -449,8 +449,8 @@ class SumoRun:
                 self._drop(act.vid, t, "vanished")
             elif r.get(tc.VAR_ROUTE_ID, act.route_id) != act.route_id:
                 self._rebuild(act)
-            elif self.tracks.past_own_track(act):
-                self.tracks.rebuild(act, self.conn.sumo.vehicle)
+            else:
+                self.tracks.leave_own_track(act)
         self.vehicles.refresh_order()
         lane_id = self.tracks.lanes.id
         rows = [res[vid] for vid in self.vehicles.ids]

@@ -27,6 +27,13 @@ IDLE_TRACKS = 64
 #: curve profile in Rust, the geometry in Python), so a day's morning peak
 #: would otherwise leave its tracks held through the night (issue 22).
 IDLE_TRACK_S = 120.0
+#: A vehicle leaves its own lane-change track for a shared one once its
+#: front is this far (m) into an edge after the change's: the shared track
+#: starts at the edge's start, and the vehicle's rear axle (up to about 4 m
+#: behind the front) and the smoothing of the track's first metres must be
+#: on it (switched at 0.4 m in, a vehicle's rear axle projected before the
+#: track's start and SUMO lost it off the road a few seconds later).
+SHARE_AFTER_M = 15.0
 
 _Key = tuple[tuple[str, ...], int]
 
@@ -196,17 +203,30 @@ class Tracks:
         del self._key[track]
         self.fleet.remove_route(track)
 
-    def past_own_track(self, act: Active) -> bool:
-        """Has ``act``, on a track of its own (a lane change in it) and no
-        longer changing lanes, left the edge the change was on for a normal
-        lane? From there on its own track is the lane's centreline, as the
-        shared track of its route from that lane is: it can go back to that
-        one (``rebuild``), and its own, about 0.6 MB for a few km of route,
-        is freed then instead of when the vehicle arrives (issue 22)."""
+    def leave_own_track(self, act: Active) -> bool:
+        """Puts ``act`` back on a shared track once it is on a track of its
+        own (a lane change in it), no longer changing lanes, and on a normal
+        lane of an edge after the change's (``SHARE_AFTER_M`` into it): from there on its own track is
+        that lane's centreline, as the shared track of its route from that
+        lane is. Its own track, about 0.6 MB for a few km of route, is freed
+        now instead of when the vehicle arrives (issue 22). Where the vehicle
+        is comes from blendtrack, not SUMO: just past a junction SUMO's
+        ``moveToXY`` can have it on the lane beside for a step, and a track
+        built from there put it a lane over. True when it was moved."""
         if act.own_track is None or act.changing is not None:
             return False
-        lane = self.lanes.names[self.fleet.front_lane_position(act.slot)[0]]
-        return not lane.startswith(":") and lane.rpartition("_")[0] != act.geo.edges[0]
+        slot = act.slot
+        lane_id, pos = self.fleet.front_lane_position(slot)
+        lane = self.lanes.names[lane_id]
+        edge, _, index = lane.rpartition("_")
+        k = self.fleet.occurrence(slot)
+        edges = act.geo.edges
+        if lane.startswith(":") or k == 0 or k >= len(edges) or edges[k] != edge or not index.isdigit() or pos < SHARE_AFTER_M:
+            return False
+        geo, track = self.geometry(edges[k:], int(index))
+        base = act.route_base + k
+        self.retrack(act, geo, track, owned=False, base=base, route_index=base)
+        return True
 
     def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool, base: int, route_index: int | None = None) -> None:
         """Puts ``act`` on ``track`` (``owned``: built for it alone), whose
