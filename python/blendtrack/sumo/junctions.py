@@ -167,8 +167,12 @@ class Junctions:
         lane = self.conn.get_lane_id(vid)
         if not lane.startswith(":"):
             return None
+        return self._leader_on_way(vid, lane, lane not in track_lanes, track_lanes)
+
+    def _leader_on_way(self, vid: str, lane: str, beside: bool, track_lanes: list[str]) -> tuple[str, float] | None:
+        """``leader_beyond`` for ``vid`` on junction lane ``lane`` (SUMO's),
+        ``beside`` its track's."""
         pos = float(self.conn.get_lane_pos(vid))
-        beside = lane not in track_lanes
         if beside:
             edge = lane.rsplit("_", 1)[0]
             lane = next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
@@ -203,7 +207,7 @@ class Junctions:
         lane = self.conn.get_lane_id(vid)
         if not lane.startswith(":") or lane in track_lanes:
             return lead
-        own = self.leader_beyond(vid, track_lanes)
+        own = self._leader_on_way(vid, lane, True, track_lanes)
         if own is not None and own[1] < float(lead[1]):
             return own
         return lead
