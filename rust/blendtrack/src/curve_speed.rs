@@ -1,5 +1,5 @@
-//! Curve speeds previewed along the path's arc (beyond the paper; the `arc`
-//! corridor of SUMO runs, docs/sumo.md).
+//! Curve speeds previewed along the path's arc (beyond the paper; offered as
+//! the `arc` corridor).
 //!
 //! The paper's virtual obstacle is where a ray along the heading leaves a
 //! corridor of the path's widths. On a curve of radius R in a corridor of
