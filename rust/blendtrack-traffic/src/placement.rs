@@ -40,6 +40,10 @@ pub(crate) const GLIDE_BEHIND_M: f64 = 0.5;
 /// its position by less than this times dt (2 mm at 0.1 s), made up in the
 /// next step. 13 % fewer speed commands than at 0.005 m/s on the highway.
 pub(crate) const HOLD_SPEED_MPS: f64 = 0.02;
+/// A speed-only move whose new place is on the simulator's lane leaves the
+/// front at least this far (m) before the lane's end (a position at the end
+/// itself may be rounded over it).
+pub(crate) const LANE_END_MARGIN_M: f64 = 1e-3;
 /// A speed-only move may carry the front over at most this many lane ends
 /// (short junction lanes at speed).
 pub(crate) const GLIDE_MAX_LANE_ENDS: usize = 3;
@@ -170,7 +174,13 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
     } else if let Some((dist, cross)) =
         glide.filter(|&(dist, _)| dist - expect * dt_s <= GLIDE_BEHIND_M)
     {
-        glide_move(d, &mut p, expect, dist, cross, dt_s)
+        // Room to the end of the lane the simulator has the front on, when
+        // the new place is on that lane: a speed-only move stays on it.
+        let room = match d.known {
+            Some((lane, at)) if !cross && lane == piece.lane => piece.lane_length_m - at,
+            _ => f64::INFINITY,
+        };
+        glide_move(d, &mut p, expect, (dist, room), cross, dt_s)
     } else if on_lane && p.pos >= d.body.length_m {
         if let Some((lane, known)) = d.known {
             if lane == piece.lane {
@@ -199,17 +209,26 @@ fn crossing_lane_speed(route: &Route, k: usize, target: f64, s_old: f64, dt_s: f
 /// GLIDE_TOLERANCE_* of the vehicle's own speed in the simulator's lane
 /// coordinates (`expect`): a simulator a little off (ahead, or behind by up
 /// to GLIDE_BEHIND_M) is brought back over a few steps; it is never moved
-/// backwards. [`Move::Hold`] when the speed it has will do.
+/// backwards. Nor is it carried over the end of its lane (`room` ahead of
+/// it) while the new place is still on that lane: a simulator ahead of
+/// blendtrack (a step of 1 s from a standstill, its Euler move against
+/// blendtrack's sub-steps) was carried 1 cm over a stop line where
+/// blendtrack stopped 20 cm before it, stood there inside the junction, and
+/// the crossing traffic waited for it while it waited for them.
+/// [`Move::Hold`] when the speed it has will do.
 fn glide_move(
     d: &Driven,
     p: &mut Placement,
     expect: f64,
-    dist: f64,
+    (dist, room): (f64, f64),
     cross: bool,
     dt_s: f64,
 ) -> Move {
     let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect;
     p.sumo_speed = (dist / dt_s).clamp((expect - tol).max(0.0), expect + tol);
+    if p.sumo_speed * dt_s > room - LANE_END_MARGIN_M {
+        p.sumo_speed = ((room - LANE_END_MARGIN_M) / dt_s).max(0.0);
+    }
     // A standstill is always sent: a held creep speed would let
     // the simulator drift ahead (0.4 mm a step at 4 mm/s), and
     // it is never moved back.
@@ -561,7 +580,7 @@ mod tests {
                 sumo_speed: f64::NAN,
                 predicted: None,
             };
-            let mv = glide_move(&d, &mut p, dist, dist, false, 1.0);
+            let mv = glide_move(&d, &mut p, dist, (dist, f64::INFINITY), false, 1.0);
             (mv, p.sumo_speed, p.predicted)
         };
         let (mv, speed, predicted) = glide(HOLD_SPEED_MPS);
@@ -607,6 +626,48 @@ mod tests {
         assert!(
             (sim.pos - want).abs() < 1e-3,
             "simulator drifted to {} vs {want}",
+            sim.pos
+        );
+    }
+
+    #[test]
+    fn a_simulator_ahead_is_not_carried_over_the_line_blendtrack_stops_before() {
+        // A red light at the junction (200 m). Near the line the simulator
+        // has the front 0.9 m ahead of blendtrack's (as after a 1 s step
+        // from a standstill). Blendtrack stops before the line; the
+        // simulator must too: over it, it stands inside the junction.
+        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+        f.set_signal(0, &[Signal::Stop]).unwrap();
+        let a = f
+            .add_vehicle(t, None, None, body(), at(150.0, 10.0), None)
+            .unwrap() as i64;
+        let mut sim = Sim {
+            lanes: vec![(10, 200.0), (11, 10.0), (12, 390.0 * 1.01)],
+            lane: 0,
+            pos: 0.0,
+            speed: 0.0,
+        };
+        let mut read = true;
+        let mut pushed = false;
+        for k in 0..600 {
+            read = sim_step(&mut f, a, &mut sim, read).read_position[0];
+            let (_, front) = front_lane_pos(&f, a);
+            if !pushed && front > 199.0 {
+                sim.pos = (sim.pos + 0.9).min(199.99);
+                pushed = true;
+                read = true; // and blendtrack hears of it
+            }
+            assert_eq!(
+                sim.lane, 0,
+                "step {k}: the simulator took the front over the line"
+            );
+            assert!(front < 200.0, "step {k}: blendtrack crossed at red");
+        }
+        assert!(pushed, "never near");
+        assert!(f.state(a).unwrap().v_mps.abs() < 1e-3, "it stopped");
+        assert!(
+            sim.pos > 199.0,
+            "the simulator stands at the line: {}",
             sim.pos
         );
     }
