@@ -79,11 +79,15 @@ class FakeConn:
     def __init__(self) -> None:
         self.vehicle = FakeVehicle()
         self.lanes: dict[str, list[str]] = {}
+        # The lights' subscription results (as of the simulation step) and
+        # their states now (another client may have switched one since).
         self.tls_results: dict[str, dict[int, str]] = {}
-        self.sumo = SimpleNamespace(vehicle=self.vehicle, trafficlight=SimpleNamespace(getAllSubscriptionResults=lambda: self.tls_results))
+        self.tls_now: dict[str, str] = {}
+        self.sumo = SimpleNamespace(
+            vehicle=self.vehicle,
+            trafficlight=SimpleNamespace(getAllSubscriptionResults=lambda: self.tls_results, getRedYellowGreenState=self.tls_now.__getitem__),
+        )
         self.tc = tc
-        # The lights' states come from the subscription results (as over TraCI).
-        self.use_subscriptions = True
 
     def vehicles_on(self, lane: str) -> list[str]:
         return self.lanes.get(lane, [])
@@ -469,12 +473,19 @@ def test_refresh_tls_passes_on_changed_lights_only() -> None:
     j = Junctions(conn, None, tracks, fleet, 4.0)  # type: ignore[arg-type]
     key = tc.TL_RED_YELLOW_GREEN_STATE
     conn.tls_results = {"a": {key: "Gr"}, "b": {key: "rG"}}
+    conn.tls_now.update(a="Gr", b="rG")
     j.refresh_tls()
     assert sorted(sent) == [(0, "Gr"), (1, "rG")]
     sent.clear()
-    conn.tls_results = {"a": {key: "Gr"}, "b": {key: "ry"}}
+    conn.tls_now.update(b="ry")
     j.refresh_tls()
     assert sent == [(1, "ry")] and j.tls_state == {"a": "Gr", "b": "ry"}
+    # A light switched by another client after the step: its state now, not
+    # the subscription's of the step (the same on libsumo and TraCI).
+    sent.clear()
+    conn.tls_now.update(a="rr")
+    j.refresh_tls()
+    assert sent == [(0, "rr")]
 
 
 def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tuple[Any, float] = (None, 0.0)) -> tuple[FakeConn, Junctions, dict[str, Any]]:

@@ -955,6 +955,8 @@ def test_traci_backend_matches_libsumo(tmp_path: Path) -> None:
     for vid in ra:
         assert rb[vid].steps == ra[vid].steps
         assert abs(rb[vid].sum_abs_e - ra[vid].sum_abs_e) < 1e-6 * max(1.0, ra[vid].sum_abs_e)
+    # The same observations at the same moments: the same rows to the digit.
+    assert (tmp_path / "lib" / "vehicles.csv").read_text() == (tmp_path / "traci" / "vehicles.csv").read_text()
 
 
 def test_run_scenario_takes_a_str_folder_and_refuses_none(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -105,7 +105,6 @@ class SumoConnection:
         self.out_dir = out_dir
         self.sumo: Any = None
         self.tc: Any = None
-        self.use_subscriptions = False
         self.backend = "libsumo"
         self.backend_note = ""
         self.dt = math.nan
@@ -186,7 +185,6 @@ class SumoConnection:
 
             self.sumo = traci
             self.tc = tc
-            self.use_subscriptions = True
             label = f"blendtrack-{os.getpid()}-{id(self)}"
             try:
                 traci.start(self.command(), label=label)
@@ -205,7 +203,6 @@ class SumoConnection:
 
             self.sumo = libsumo
             self.tc = tc
-            self.use_subscriptions = False
             _LIBSUMO_STARTED = True
             try:
                 libsumo.start(self.command())
@@ -360,7 +357,7 @@ class SumoConnection:
         """SUMO's own driving for ``vid`` again (each call on its own: one
         failing, say on a vehicle gone meanwhile, does not skip the rest)."""
         v = self.sumo.vehicle
-        for call, args in ((v.setSpeed, (-1.0,)), (v.setSpeedMode, (31,)), (v.setLaneChangeMode, (1621,)), (v.unsubscribe, ())):
+        for call, args in ((v.setSpeed, (-1.0,)), (v.setSpeedMode, (31,)), (v.setLaneChangeMode, (1621,))):
             try:
                 call(vid, *args)
             except Exception:

@@ -72,18 +72,16 @@ class Junctions:
     def refresh_tls(self) -> None:
         """Passes the lights that changed this step to the RouteFleet.
 
-        With libsumo each light's state is read anew (a microsecond each):
+        Each light's state is read anew (a microsecond each with libsumo):
         the subscription's value is the one of the simulation step, and a
         light another client switched since (a step hook of this process,
-        which runs after the step) would be seen a step late. Over TraCI
-        the subscription holds what the other clients did before the step."""
-        tc = self.conn.tc
+        which runs after the step) would be seen a step late. Both backends
+        read it so, so that they drive alike."""
         light = self.tracks.lights.id
         set_signal = self.fleet.set_signal
         tl = self.conn.sumo.trafficlight
-        fresh = not self.conn.use_subscriptions
-        for tls, res in tl.getAllSubscriptionResults().items():
-            state = tl.getRedYellowGreenState(tls) if fresh else res.get(tc.TL_RED_YELLOW_GREEN_STATE, "")
+        for tls in tl.getAllSubscriptionResults():
+            state = tl.getRedYellowGreenState(tls)
             if self.tls_state.get(tls) != state:
                 self.tls_state[tls] = state
                 set_signal(light(tls), state)

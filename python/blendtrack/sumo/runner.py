@@ -360,18 +360,19 @@ class SumoRun:
         vehicle still in the simulation, in ``self.vehicles.order``; drops the ones
         that vanished without an event.
 
-        Over TraCI these come from vehicle subscriptions (one socket round trip
-        for all). With libsumo 1.28 a vehicle subscription breaks every later
-        ``simulationStep`` ("Vehicle 'x' is not known") once another client
-        removes the subscribed vehicle, so there the same values come from
-        in-process getters (under a microsecond each), and only the ones
-        needed: the leader every step, the lane position where RouteFleet asks
-        for it (unknown, or due for a check), the route id every
-        ``ROUTE_CHECK_EVERY`` steps.
+        The values come from getters, and only the ones needed: the leader
+        every step, the lane position where RouteFleet asks for it (unknown,
+        or due for a check), the route id every ``ROUTE_CHECK_EVERY`` steps.
+        With libsumo they are in-process calls (under a microsecond each);
+        vehicle subscriptions are not used, as with libsumo 1.28 one breaks
+        every later ``simulationStep`` ("Vehicle 'x' is not known") once
+        another client removes the subscribed vehicle. Over TraCI the same
+        getters go over the socket: the two backends observe the same values
+        at the same moments, so they drive alike (subscriptions over TraCI
+        gave every position every step, and a vehicle SUMO had 1 cm into a
+        junction was let go over TraCI and stood there under libsumo).
         """
         conn = self.conn
-        if conn.use_subscriptions:
-            return self._observe_subscribed(t)
         self.vehicles.refresh_order()
         try:
             asked, leaders = self._leaders()
@@ -436,29 +437,6 @@ class SumoRun:
             else:
                 leaders[k] = junctions.leader_on_track(ids[i], order[i].geo.piece_lane, leaders[k])
         return ask, self.sumo_leaders.correct(leaders)
-
-    def _observe_subscribed(self, t: float) -> _Observed:
-        """``_observe`` over TraCI: everything from the vehicle subscriptions."""
-        tc = self.conn.tc
-        res = self.conn.sumo.vehicle.getAllSubscriptionResults()
-        self.vehicles.refresh_order()
-        for act in list(self.vehicles.order):
-            r = res.get(act.vid)
-            if r is None:
-                self.counts["vanished"] += 1
-                self._drop(act.vid, t, "vanished")
-            elif r.get(tc.VAR_ROUTE_ID, act.route_id) != act.route_id:
-                self._rebuild(act)
-            else:
-                self.tracks.leave_own_track(act)
-        self.vehicles.refresh_order()
-        lane_id = self.tracks.lanes.id
-        rows = [res[vid] for vid in self.vehicles.ids]
-        leaders = self.sumo_leaders.correct([r.get(tc.VAR_LEADER) for r in rows])
-        lanes = [lane_id(r.get(tc.VAR_LANE_ID, "")) for r in rows]
-        poss = [float(r.get(tc.VAR_LANEPOSITION, math.nan)) for r in rows]
-        self.lanes.changing_leaders(leaders, None, self.vehicles.index)
-        return (None, leaders), list(range(len(rows))), lanes, poss
 
     # ------------------------------------------------------------------ apply
     def _apply(self, t: float, ids: list[str], acts: list[Active], out: dict[str, np.ndarray]) -> None:

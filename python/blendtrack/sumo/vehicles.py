@@ -168,10 +168,6 @@ class Controlled:
         self.read_position.add(vid)
         v.setSpeedMode(vid, 0)
         v.setLaneChangeMode(vid, 0)
-        if self.conn.use_subscriptions:
-            tc = self.conn.tc
-            v.subscribe(vid, [tc.VAR_ROUTE_ID, tc.VAR_LANE_ID, tc.VAR_LANEPOSITION])
-            v.subscribeLeader(vid, LEADER_RANGE_M)
 
     def drop(self, vid: str, t: float, reason: str) -> None:
         """``vid`` is no longer driven by blendtrack (``reason``: arrived,
