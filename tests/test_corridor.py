@@ -6,6 +6,7 @@ the lane's half width; "carriageway" the same against the whole road."""
 from __future__ import annotations
 
 import csv
+import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -46,14 +47,103 @@ def _mean_speed(result: sumo.RunResult) -> float:
     return sum(r.sum_v for r in result.records) / sum(r.steps for r in result.records)
 
 
+def _loop_centreline(net, edges: list[str], laps: int, ds: float) -> tuple[np.ndarray, np.ndarray]:
+    """(s, |kappa|) every `ds` m along lane 0 of `edges` (with the junction
+    lanes between them) driven `laps` times, read off SUMO's network."""
+    seq = edges * laps
+    pts: list[tuple[float, float]] = []
+    for a, b in zip(seq, seq[1:] + [None]):
+        pts += net.getEdge(a).getLane(0).getShape()
+        if b is not None:
+            via = net.getEdge(a).getOutgoing()[net.getEdge(b)][0].getViaLaneID()
+            pts += net.getLane(via).getShape() if via else []
+    p = np.array(pts, float)
+    p = p[np.r_[True, np.hypot(*np.diff(p, axis=0).T) > 1e-6]]
+    s_pts = np.r_[0.0, np.cumsum(np.hypot(*np.diff(p, axis=0).T))]
+    s = np.arange(0.0, s_pts[-1], ds)
+    q = np.c_[np.interp(s, s_pts, p[:, 0]), np.interp(s, s_pts, p[:, 1])]
+    # Heading change over 8 m: the arcs are written every <= 2 m, a shorter
+    # window would see the polyline's corners instead of the arc.
+    th = np.unwrap(np.arctan2(*np.diff(q, axis=0).T[::-1]))
+    th = np.r_[th, th[-1]]
+    m = int(round(4.0 / ds))
+    k = np.abs(th[2 * m:] - th[:-2 * m]) / (2 * m * ds)
+    return s, np.r_[np.full(m, k[0]), k, np.full(m, k[-1])]
+
+
+def _envelope_speeds(s: np.ndarray, kappa: np.ndarray, corridor: str, v0: float, v_start: float, a_y: float, w: float) -> np.ndarray:
+    """The speed each corridor allows along the track, followed from
+    `v_start` at the free-flow acceleration a_p (1 - (v / v0)^3) of the
+    default config, computed here from the closed forms (not by the code
+    under test):
+    - arc: the curve speed sqrt(a_y / |kappa|) brought back along the track
+      by braking at |curve_deceleration| (v^2 <= v_c^2 + 2 |b_c| x);
+    - lane: the ray from a point reaches the border of the half width w
+      sqrt(2 R w + w^2) into a curve of radius R (plus the straight before
+      it, at most ray_horizon_m), and the stopping law's steady speed for a
+      standing obstacle there solves v tau + v^2 / (2 |b_f|) = reach."""
+    from blendtrack import ControllerConfig
+
+    c = ControllerConfig()
+    ds = float(s[1] - s[0])
+    n = len(s)
+    with np.errstate(divide="ignore"):
+        if corridor == "arc":
+            allow2 = np.minimum(a_y / kappa, v0**2)
+            for i in range(n - 2, -1, -1):
+                allow2[i] = min(allow2[i], allow2[i + 1] + 2.0 * abs(c.curve_deceleration) * ds)
+        else:
+            reach = np.sqrt(2.0 * w / kappa + w * w)
+            for i in range(n - 2, -1, -1):
+                reach[i] = min(reach[i], reach[i + 1] + ds)
+            reach = np.minimum(reach, c.ray_horizon_m)
+            b, tau = abs(c.max_deceleration), c.reaction_time
+            allow2 = np.minimum(-tau * b + np.sqrt((tau * b) ** 2 + 2.0 * b * reach), v0) ** 2
+    v = np.empty(n)
+    v[0] = min(v_start, float(np.sqrt(allow2[0])))
+    for i in range(n - 1):
+        a = c.preferred_acceleration * (1.0 - (v[i] / v0) ** c.acceleration_exp)
+        v[i + 1] = np.sqrt(min(allow2[i + 1], v[i] ** 2 + 2.0 * a * ds))
+    return v
+
+
+def _predicted_mean_speed(corridor: str, end_s: float, a_y: float) -> float:
+    """The controlled vehicles' time-weighted mean speed over [0, end_s] if
+    each drove its corridor's envelope (_envelope_speeds) from its departure:
+    the flows of the route file (auto_ccw every 30 s from 0 at departSpeed
+    "max", auto_cw every 60 s from 15 at 0) on the network's lanes. Leaders
+    do not enter: SUMO's drivers go 25 m/s everywhere and the controlled
+    vehicles, 30 s apart, all follow the same envelope."""
+    import sumolib
+
+    net = sumolib.net.readNet(str(SCENARIOS / "rural_loop" / "rural_loop.net.xml"), withInternal=True)
+    lane = net.getEdge("e0").getLane(0)
+    v0, w = lane.getSpeed(), 0.5 * lane.getWidth()
+    routes = {"loop_ccw": ["e0", "e1", "e2", "e3", "e4", "e5"], "loop_cw": ["-e5", "-e4", "-e3", "-e2", "-e1", "-e0"]}
+    root = ET.parse(SCENARIOS / "rural_loop" / "rural_loop.rou.xml").getroot()
+    dist = time = 0.0
+    for flow in root.iter("flow"):
+        if flow.get("type") != "auto":
+            continue
+        s, kappa = _loop_centreline(net, routes[flow.get("route", "")], 2, 0.5)
+        v = _envelope_speeds(s, kappa, corridor, v0, v0 if flow.get("departSpeed") == "max" else 0.0, a_y, w)
+        t = np.r_[0.0, np.cumsum(np.diff(s) / np.maximum(0.5 * (v[1:] + v[:-1]), 1e-3))]
+        begin, period = float(flow.get("begin", "0")), float(flow.get("period", "0"))
+        for k in range(int(np.ceil((end_s - begin) / period))):
+            left = end_s - (begin + k * period)
+            dist += float(np.interp(left, t, s))
+            time += left
+    return dist / time
+
+
 def test_the_arc_corridor_is_faster_than_the_lane_on_the_rural_loop(tmp_path: Path) -> None:
     """The same vehicles on the rural loop (150 s, seed 0): with the lane's
     half width the ray cast sees about 42 m through an R = 500 m curve and
     caps the speed near 14.7 m/s (rust curve_speed tests); the arc corridor
-    lets them drive at the curve speed at the comfort bound. Measured: mean
-    speed 16.6 against 12.8 m/s over 300 s (docs/sumo.md); asked here: 15 %
-    more, with the lateral acceleration of every vehicle within 10 % of the
-    comfort bound (the steering's lag where an arc begins: see
+    lets them drive at the curve speed at the comfort bound. How much faster
+    is computed here from the network's curves (_predicted_mean_speed), with
+    the lateral acceleration of every vehicle within 10 % of the comfort
+    bound (the steering's lag where an arc begins: see
     test_rural_loop_tracks_lanes_within_comfort)."""
     sc = sumo.resolve_scenario("rural_loop")
     results = {}
@@ -63,7 +153,22 @@ def test_the_arc_corridor_is_faster_than_the_lane_on_the_rural_loop(tmp_path: Pa
     arc, lane = results["arc"], results["lane"]
     assert arc.summary["corridor"] == "arc" and lane.summary["corridor"] == "lane"
     assert arc.summary["collisions"] == 0 and arc.summary["teleports"] == 0
-    assert _mean_speed(arc) > 1.15 * _mean_speed(lane), (_mean_speed(arc), _mean_speed(lane))
+    # The gain the closed forms predict on the loop's own curves (the arc
+    # envelope against the lane's ray law, each followed from the flows'
+    # departures over the same 150 s): 16.9 against 12.0 m/s, 1.41. The
+    # model leaves out how the laws track their envelopes (the arc law stays
+    # under its envelope with the lag tau, the lane's stopping law runs above
+    # its steady speed while it brakes: measured 16.4 and 12.7 m/s), so the
+    # runs must show at least half the predicted gain (measured 1.29 >= 1.20).
+    # The half is a tolerance for those omissions, not derived. A run whose
+    # "arc" ignored the curve speeds (the lane's law, or carriageway, which
+    # is the lane on this one-lane road) has a ratio of 1 and fails.
+    predicted = _predicted_mean_speed("arc", 150.0, sc.comfort_lateral_accel_mps2) / _predicted_mean_speed(
+        "lane", 150.0, sc.comfort_lateral_accel_mps2
+    )
+    assert predicted > 1.0, predicted
+    measured = _mean_speed(arc) / _mean_speed(lane)
+    assert measured >= 1.0 + 0.5 * (predicted - 1.0), (measured, predicted, _mean_speed(arc), _mean_speed(lane))
     with open(tmp_path / "arc" / "vehicles.csv") as f:
         worst = max(float(r["lateral_accel_max_mps2"]) for r in csv.DictReader(f))
     assert worst < 1.1 * sc.comfort_lateral_accel_mps2, worst
