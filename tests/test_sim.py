@@ -131,6 +131,10 @@ def test_blend_forward_settles_below_5_cm(loop: blendtrack.Path) -> None:
     cfg = blendtrack.ControllerConfig(lat_blend_factor=0.5, preferred_speed=3.0)
     _, m = blendtrack.simulate(loop, cfg, offset_m=2.0, duration_s=200.0)
     assert math.isfinite(m["settling_time_s"])
+    # Regression floor, not derived (docs/testing.md): the settled mean is
+    # set by where the blend's equilibrium lies between Stanley's (front on
+    # the path) and the rear-axle law's on each arc and by the transients
+    # through the clothoids, which have no closed form here. Measured 0.023.
     assert m["lateral_error_mean_abs_m_settled"] < 0.05
     assert m["mean_speed_mps"] == pytest.approx(3.0, abs=0.3)
 
