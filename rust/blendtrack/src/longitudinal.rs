@@ -298,10 +298,8 @@ fn ray_hits_box(
             continue;
         }
         let inv = inv_u[axis];
-        let (mut ta, mut tb) = ((lo[axis] - o[axis]) * inv, (hi[axis] - o[axis]) * inv);
-        if ta > tb {
-            std::mem::swap(&mut ta, &mut tb);
-        }
+        let (t_lo, t_hi) = ((lo[axis] - o[axis]) * inv, (hi[axis] - o[axis]) * inv);
+        let (ta, tb) = (t_lo.min(t_hi), t_lo.max(t_hi));
         t0 = t0.max(ta);
         t1 = t1.min(tb);
         if t0 > t1 {

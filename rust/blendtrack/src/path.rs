@@ -456,7 +456,9 @@ impl Path {
             } else {
                 s.rem_euclid(l)
             };
-            if r >= l || r < 0.0 {
+            // Each branch gives r >= 0 (s + l for s in [-l, 0), s - l for
+            // s >= l, rem_euclid); rounding can make it l itself.
+            if r >= l {
                 0.0
             } else {
                 r
