@@ -664,7 +664,9 @@ def test_a_barely_started_lane_change_is_given_up_when_its_room_goes(monkeypatch
     checked again each step: standing, a 10 m change takes sqrt(20) s at
     1 m/s^2, so a follower at 18 m/s on the target lane needs 5 + 18
     sqrt(20) - 10 = 75.5 m; just under that the change is given up, just
-    over it goes on; past 0.5 m from the centre it is never given up."""
+    over it goes on; past 0.5 m from the centre it is never given up, nor
+    at the centre of a lane between (a change over two lanes: given up there
+    it was put on that lane's track while SUMO had it a lane on)."""
     from blendtrack.sumo.tracks import Active
 
     conn = FakeConn()
@@ -673,14 +675,16 @@ def test_a_barely_started_lane_change_is_given_up_when_its_room_goes(monkeypatch
     lcs = lane_changes(conn)
     aborted: list[str] = []
     monkeypatch.setattr(lcs, "abort_change", lambda act: aborted.append(act.vid))
-    act = Active("me", 0, None, "", None, changing=(1, 1))  # type: ignore[arg-type]
+    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0)  # type: ignore[arg-type]
     need = 5.0 + 18.0 * math.sqrt(20.0) - 10.0
-    for gap, lat, gives_up in [(need - 1e-3, 0.1, True), (need + 1e-3, 0.1, False), (need - 1e-3, 0.6, False)]:
+    for gap, lat, index, gives_up in [(need - 1e-3, 0.1, 0, True), (need + 1e-3, 0.1, 0, False), (need - 1e-3, 0.6, 0, False),
+                                      (need - 1e-3, 0.1, 1, False)]:
         aborted.clear()
         conn.vehicle.cars["me"]["lat"] = lat
+        conn.vehicle.cars["me"]["lane_index"] = index
         conn.vehicle.neighbours = {("me", 0): [("f", gap)]}
         lcs.changing_leader(act, None)
-        assert aborted == (["me"] if gives_up else []), (gap, lat)
+        assert aborted == (["me"] if gives_up else []), (gap, lat, index)
 
 
 def test_a_leader_on_the_tracks_way_is_taken_when_sumo_has_the_vehicle_beside_it() -> None:

@@ -54,6 +54,24 @@ _DROP = (
     ("0", "1"),
 )
 
+# An exit two lanes over, due early: a 3-lane road whose first edge is
+# 60 m long, then 250 m to the off-ramp, which only the right lane reaches.
+# The ramp stream departs on the left lane: its change is due on the first
+# edge already (2 lanes x EARLY_CHANGE_ROOM_M > 250 m), while its lane goes
+# on: the track goes on along it (test_an_early_change_leaves_the_track_going_on).
+_EARLY_EXIT = (
+    '<nodes><node id="a" x="-310" y="0"/><node id="m1" x="-250" y="0" type="priority"/>'
+    '<node id="m2" x="0" y="0" type="priority"/><node id="e" x="600" y="0"/><node id="x" x="300" y="-120"/></nodes>',
+    '<edges><edge id="in" from="a" to="m1" numLanes="3" speed="20"/><edge id="mid" from="m1" to="m2" numLanes="3" speed="20"/>'
+    '<edge id="out" from="m2" to="e" numLanes="3" speed="20"/><edge id="ramp" from="m2" to="x" numLanes="1" speed="20"/></edges>',
+    '<connections><connection from="in" to="mid" fromLane="0" toLane="0"/><connection from="in" to="mid" fromLane="1" toLane="1"/>'
+    '<connection from="in" to="mid" fromLane="2" toLane="2"/><connection from="mid" to="ramp" fromLane="0" toLane="0"/>'
+    '<connection from="mid" to="out" fromLane="0" toLane="0"/><connection from="mid" to="out" fromLane="1" toLane="1"/>'
+    '<connection from="mid" to="out" fromLane="2" toLane="2"/></connections>',
+    ('in mid out', 'in mid ramp'),
+    ("0", "2"),
+)
+
 
 def _netconvert() -> str:
     return str(Path(sumo_binary(False)).with_name("netconvert"))
@@ -119,7 +137,7 @@ def _controlled(cfg: Path, out: Path) -> tuple[int, int, dict[str, float], int]:
     return _arrived(out / "sumo" / "tripinfo.xml"), collisions, standing, n
 
 
-@pytest.mark.parametrize("spec", [_ZIPPER, _DROP], ids=["zipper", "lane_drop"])
+@pytest.mark.parametrize("spec", [_ZIPPER, _DROP, _EARLY_EXIT], ids=["zipper", "lane_drop", "early_exit"])
 def test_a_merge_flows_without_collisions_or_queues(tmp_path: Path, spec: tuple) -> None:  # type: ignore[type-arg]
     cfg = _scenario(tmp_path, spec)
     plain_arrived, plain_collisions = _plain(cfg, tmp_path / "plain")
@@ -142,3 +160,29 @@ def test_a_merge_flows_without_collisions_or_queues(tmp_path: Path, spec: tuple)
     assert arrived >= THROUGHPUT_SHARE * plain_arrived, (arrived, plain_arrived)
     worst = max(standing.values(), default=0.0)
     assert worst <= MAX_STANDING_S, sorted(standing.items(), key=lambda kv: -kv[1])[:5]
+
+
+def test_an_early_change_leaves_the_track_going_on(tmp_path: Path) -> None:
+    """A change due early on a lane that goes on: the change is pending on
+    the first edge, and the track follows the lane on to where it ends for
+    the route (the end of ``mid``), so a vehicle that finds no gap on the
+    short first edge drives on instead of standing at its end (Eccles: one
+    stood 80 s there, its lane queued behind it)."""
+    from blendtrack.sumo.geometry import route_geometry
+
+    cfg = _scenario(tmp_path, _EARLY_EXIT)
+    net = sumolib.net.readNet(str(cfg.with_name("n.net.xml")), withInternal=True)
+    geo = route_geometry(net, ("in", "mid", "ramp"), 2, defer_changes=True)
+    assert geo.pending_change == (0, 0) and geo.pending_early
+    assert "mid_2" in geo.piece_lane
+    # Up to the end of mid's left lane: in + junction + mid (within a metre).
+    ends = net.getEdge("in").getLength() + net.getEdge("mid").getLength()
+    assert geo.length_m >= ends - 1.0, (geo.length_m, ends)
+    # From mid's right lane the route needs no change: nothing pending.
+    assert route_geometry(net, ("mid", "ramp"), 0, defer_changes=True).pending_change is None
+    # Where the lane does not go on (mid's left lane, 250 m < 300 m to
+    # cross two lanes, but the last edge before the ramp): the track stops
+    # at its end and the change is due there, not early.
+    late = route_geometry(net, ("mid", "ramp"), 2, defer_changes=True)
+    assert late.pending_change == (0, 0) and not late.pending_early
+    assert late.length_m <= net.getEdge("mid").getLength() + 1.0

@@ -102,9 +102,14 @@ class RouteGeometry:
     stops: list[tuple[float, str, int, bool, str, float]] = field(default_factory=list)
     #: Route edges this geometry was built for.
     edges: tuple[str, ...] = field(default_factory=tuple)
-    #: (edge index in ``edges``, target lane index) when the track stops at
-    #: the end of a lane that does not continue and a lane change is due.
+    #: (edge index in ``edges``, target lane index) when a lane change is
+    #: due: the track stops at the end of a lane that does not continue.
     pending_change: tuple[int, int] | None = None
+    #: The pending change is due early (``EARLY_CHANGE_ROOM_M``): the track
+    #: goes on along the lane past its edge, to where the lane ends for the
+    #: route, and a vehicle that could not change on that edge gets a new
+    #: track on the next (``Tracks.retry_early_change``).
+    pending_early: bool = False
     #: Total arc length (m).
     length_m: float = 0.0
 
@@ -260,7 +265,7 @@ def _pieces(
     spacing_m: float,
     defer_changes: bool = False,
     change: tuple[float, float] | tuple[float, float, int] | None = None,
-) -> tuple[list[_Piece], tuple[int, int] | None]:
+) -> tuple[list[_Piece], tuple[int, int] | None, bool]:
     """Lane pieces along the route: normal lanes, junction lanes, and lane
     changes within an edge where the current lane does not continue.
 
@@ -269,7 +274,10 @@ def _pieces(
     pieces stop at the end of the lane that does not continue and the second
     value says where the change is due: (edge index, target lane index); the
     caller rebuilds once the change can be made. Without it the change spans
-    the whole edge. ``change`` = (start, length, target lane index) is a
+    the whole edge. A change due early (``change_early``) on a lane that goes
+    on is pending the same way, but the pieces follow the lane on to where
+    it ends for the route; the third value says so. ``change`` = (start,
+    length, target lane index) is a
     change the route does not need (to overtake, to keep right): onto that
     lane of the first edge, which must go on along the route.
     """
@@ -325,6 +333,8 @@ def _pieces(
         return False
 
     out: list[_Piece] = []
+    # A change due early on a lane that goes on: (edge index, target lane index).
+    early: tuple[int, int] | None = None
     lane = objs[0].getLane(min(max(start_index, 0), objs[0].getLaneNumber() - 1))
     # A change the route does not need: the pieces of the first edge are the change's.
     chosen = change is not None and len(change) == 3
@@ -348,7 +358,23 @@ def _pieces(
             _tag(out, tag_from, k)
             break
         cs = conns_to(lane, k + 1)
-        if first_done:
+        if defer_changes and not (k == 0 and change is not None) and cs and (early is not None or change_early(lane, k)):
+            # Due early, but the lane goes on: the track follows it (the
+            # vehicle does not stand at the edge's end waiting for a gap, with
+            # the lane's traffic behind it: Eccles, three lanes to cross on a
+            # 123 m edge, one stood 80 s and its lane queued behind it); the
+            # change is tried on this edge, then on the next ones.
+            if early is None:
+                able = [ln for ln in objs[k].getLanes() if conns_to(ln, k + 1)]
+                best = [ln for ln in able if ln.getID() in no_change[k]] or able
+                early = (k, min(best, key=lambda ln: abs(ln.getIndex() - lane.getIndex())).getIndex())
+            out.append(piece(lane))
+        elif not cs and defer_changes and early is not None:
+            # Where the lane ends for the route after an early change was due.
+            out.append(piece(lane))
+            _tag(out, tag_from, k)
+            return out, early, True
+        elif first_done:
             pass
         elif not cs or change_early(lane, k):
             # Change to the nearest lane of this edge that continues.
@@ -364,7 +390,7 @@ def _pieces(
             elif defer_changes:
                 out.append(piece(lane))
                 _tag(out, tag_from, k)
-                return out, (k, target.getIndex())
+                return out, (k, target.getIndex()), False
             else:
                 out.extend(_lane_change_pieces(lane, target, spacing_m))
             lane = target
@@ -389,7 +415,7 @@ def _pieces(
         out.extend(vias)
         _tag(out, tag_from, k)
         lane = c.getToLane()
-    return out, None
+    return out, early, early is not None
 
 
 def _tag(pieces: list[_Piece], start: int, occurrence: int) -> None:
@@ -427,7 +453,7 @@ def route_geometry(
     """
     if len(edges) == 0:
         raise PathError("the route has no edges")
-    pieces, pending = _pieces(net, edges, start_lane_index, spacing_m, defer_changes, change)
+    pieces, pending, early = _pieces(net, edges, start_lane_index, spacing_m, defer_changes, change)
     # Joined and smoothed in Rust: the pieces end to end (sharing a point
     # where one starts at the last one's end), the Gaussian smoothing, and
     # each piece cut where the track comes near its lane's centreline or
@@ -481,6 +507,7 @@ def route_geometry(
         piece_offset=joined["run_offset"],
         length_m=joined["length_m"],
         pending_change=pending,
+        pending_early=early,
         stops=stops,
         edges=tuple(edges),
     )

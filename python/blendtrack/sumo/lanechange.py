@@ -189,10 +189,13 @@ class LaneChanges:
             if not self.tactical_room(act.vid, direction, float(v.getSpeed(act.vid)), TACTICAL_KEEP_FACTOR):
                 self.abort_change(act)
                 return lead
-        elif abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M:
+        elif abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M and v.getLaneIndex(act.vid) == act.change_from:
             # Barely started (or held at its start by a leader): the room
             # checked when it began may be gone, e.g. a follower has come up
-            # on the target lane while the vehicle stood. Check again.
+            # on the target lane while the vehicle stood. Check again. Not
+            # when it passes the centre of a lane between (a change over
+            # several lanes): given up there, it was put on that lane's
+            # track while SUMO had it a lane further, and stood (Eccles).
             speed = float(v.getSpeed(act.vid))
             length = change_length(speed, math.inf)
             if not self.room_for_change(act.vid, direction, speed, length):
@@ -226,6 +229,7 @@ class LaneChanges:
         self.tracks.retrack(act, geo, track, owned=True, base=base)
         self.set_changing(act, (direction, target))
         act.change_span = span
+        act.change_from = int(self.conn.sumo.vehicle.getLaneIndex(act.vid))
         act.record.lane_changes += 1
 
     # ---------------------------------------------------- the route's changes

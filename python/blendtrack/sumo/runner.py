@@ -391,6 +391,10 @@ class SumoRun:
                 self._rebuild(act)
             else:
                 leave_own(act)
+        retry = self.tracks.retry_early_change
+        for act in self.vehicles.order:
+            if act.geo.pending_early:
+                retry(act)
         index, lane_id = self.vehicles.index, self.tracks.lanes.id
         get_lane, get_pos = conn.get_lane_id, conn.get_lane_pos
         read = [(i, vid) for vid in self.vehicles.read_position if (i := index.get(vid)) is not None]

@@ -76,6 +76,8 @@ class Active:
     #: The change under way: (SUMO lane position of the front where it
     #: starts, its length in m) on the lane it leaves.
     change_span: tuple[float, float] | None = None
+    #: The lane index the change under way started from.
+    change_from: int = -1
     #: The track built for this vehicle alone (a lane change in it), removed
     #: from the RouteFleet once the vehicle leaves it; None on a shared track.
     own_track: int | None = None
@@ -226,6 +228,30 @@ class Tracks:
         geo, track = self.geometry(edges[k:], int(index))
         base = act.route_base + k
         self.retrack(act, geo, track, owned=False, base=base, route_index=base)
+        return True
+
+    def retry_early_change(self, act: Active) -> bool:
+        """A vehicle whose track has a change due early (``pending_early``)
+        and that has passed that edge without making it: a new track from
+        the lane it is on, ``SHARE_AFTER_M`` into the edge it has reached (as
+        ``leave_own_track``, where blendtrack has it), with the change due on
+        this edge if it still is. True when it was moved."""
+        geo = act.geo
+        if not geo.pending_early or geo.pending_change is None or act.changing is not None or act.own_track is not None:
+            return False
+        slot = act.slot
+        k = self.fleet.occurrence(slot)
+        edges = geo.edges
+        if k <= geo.pending_change[0] or k >= len(edges):
+            return False
+        lane_id, pos = self.fleet.front_lane_position(slot)
+        lane = self.lanes.names[lane_id]
+        edge, _, index = lane.rpartition("_")
+        if lane.startswith(":") or edges[k] != edge or not index.isdigit() or pos < SHARE_AFTER_M:
+            return False
+        new_geo, track = self.geometry(edges[k:], int(index))
+        base = act.route_base + k
+        self.retrack(act, new_geo, track, owned=False, base=base, route_index=base)
         return True
 
     def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool, base: int, route_index: int | None = None) -> None:
