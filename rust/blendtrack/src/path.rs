@@ -1114,6 +1114,20 @@ fn buckets(s: &[f64], length: f64) -> Vec<u32> {
 mod tests {
 
     #[test]
+    fn arc_delta_of_half_a_lap_is_forward_either_way() {
+        // The shortest way round is in (-L/2, L/2]: exactly half a lap is
+        // +L/2 whichever end it is measured from.
+        let p = Path::circle(20.0, 0.01).unwrap();
+        let (l, h) = (p.length(), 0.5 * p.length());
+        assert_eq!(p.arc_delta(0.0, h), h);
+        assert_eq!(p.arc_delta(h, 0.0), h);
+        assert!((p.arc_delta(0.25 * l, 0.75 * l) - h).abs() < 1e-9);
+        // Just inside, the sign is the way round.
+        assert!(p.arc_delta(h, 1e-6) < 0.0);
+        assert!(p.arc_delta(1e-6, h) > 0.0);
+    }
+
+    #[test]
     fn arc_length_lookup_is_exact_on_unevenly_sampled_paths() {
         // Segment lengths from 0.01 m to 40 m, as road-network lane shapes have.
         let mut pts = vec![[0.0, 0.0]];
