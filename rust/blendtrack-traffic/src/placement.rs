@@ -341,11 +341,7 @@ mod tests {
         // 200 m); the simulator reports the front 0.01 m into the junction
         // lane (11): the move keeps it there (speed 0), it is not placed
         // back onto lane 10.
-        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
-        f.set_signal(0, &[Signal::Stop]).unwrap();
-        let a = f
-            .add_vehicle(t, None, None, body(), at(180.0, 5.0), None)
-            .unwrap() as i64;
+        let (mut f, a) = before_light(Signal::Stop, 180.0, 5.0);
         for _ in 0..300 {
             step(&mut f, &[a], false);
         }
@@ -466,12 +462,7 @@ mod tests {
         let a = f
             .add_vehicle(t, None, None, body(), at(150.0, 10.0), None)
             .unwrap() as i64;
-        let mut sim = Sim {
-            lanes: vec![(10, 200.0), (11, 10.0), (12, 390.0 * 1.01)],
-            lane: 0,
-            pos: 0.0,
-            speed: 0.0,
-        };
+        let mut sim = Sim::on_road();
         let mut read = true;
         let mut crossings = 0;
         for k in 0..120 {
@@ -598,11 +589,7 @@ mod tests {
     fn a_vehicle_that_stops_leaves_the_simulator_standing_not_creeping() {
         // A red light ahead: the vehicle brakes to a stop at the line and
         // waits; the simulator, moved by the speeds sent, ends where it is.
-        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
-        f.set_signal(0, &[Signal::Stop]).unwrap();
-        let a = f
-            .add_vehicle(t, None, None, body(), at(150.0, 10.0), None)
-            .unwrap() as i64;
+        let (mut f, a) = before_light(Signal::Stop, 150.0, 10.0);
         let mut sim = Sim::on_lane_10();
         let mut read = true;
         for _ in 0..3000 {
@@ -636,17 +623,8 @@ mod tests {
         // has the front 0.9 m ahead of blendtrack's (as after a 1 s step
         // from a standstill). Blendtrack stops before the line; the
         // simulator must too: over it, it stands inside the junction.
-        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
-        f.set_signal(0, &[Signal::Stop]).unwrap();
-        let a = f
-            .add_vehicle(t, None, None, body(), at(150.0, 10.0), None)
-            .unwrap() as i64;
-        let mut sim = Sim {
-            lanes: vec![(10, 200.0), (11, 10.0), (12, 390.0 * 1.01)],
-            lane: 0,
-            pos: 0.0,
-            speed: 0.0,
-        };
+        let (mut f, a) = before_light(Signal::Stop, 150.0, 10.0);
+        let mut sim = Sim::on_road();
         let mut read = true;
         let mut pushed = false;
         for k in 0..600 {

@@ -379,11 +379,7 @@ mod tests {
 
     #[test]
     fn red_light_stops_the_vehicle_before_the_line_then_green_lets_it_go() {
-        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
-        let slot = f
-            .add_vehicle(t, None, None, body(), at(100.0, 12.0), None)
-            .unwrap() as i64;
-        f.set_signal(0, &[Signal::Stop]).unwrap();
+        let (mut f, slot) = before_light(Signal::Stop, 100.0, 12.0);
         for _ in 0..400 {
             let (_, out) = step(&mut f, &[slot], false);
             assert!(!out.red_light[0]);
@@ -439,11 +435,7 @@ mod tests {
 
     #[test]
     fn a_yellow_decision_holds_until_the_light_changes() {
-        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
-        let slot = f
-            .add_vehicle(t, None, None, body(), at(120.0, 12.0), None)
-            .unwrap() as i64;
-        f.set_signal(0, &[Signal::Yellow]).unwrap();
+        let (mut f, slot) = before_light(Signal::Yellow, 120.0, 12.0);
         for _ in 0..300 {
             let (_, out) = step(&mut f, &[slot], false);
             assert!(!out.red_light[0]);
@@ -456,11 +448,7 @@ mod tests {
             "front {sf}"
         );
         // Close to the line at speed when it turns yellow: it goes through.
-        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
-        let slot = f
-            .add_vehicle(t, None, None, body(), at(200.0 - 3.5 - 4.0, 14.0), None)
-            .unwrap() as i64;
-        f.set_signal(0, &[Signal::Yellow]).unwrap();
+        let (mut f, slot) = before_light(Signal::Yellow, 200.0 - 3.5 - 4.0, 14.0);
         for _ in 0..20 {
             step(&mut f, &[slot], false);
         }
@@ -533,11 +521,7 @@ mod tests {
 
     #[test]
     fn the_junction_is_kept_clear_when_the_leader_leaves_no_room_beyond_it() {
-        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
-        f.set_signal(0, &[Signal::Priority]).unwrap();
-        let slot = f
-            .add_vehicle(t, None, None, body(), at(160.0, 8.0), None)
-            .unwrap() as i64;
+        let (mut f, slot) = before_light(Signal::Priority, 160.0, 8.0);
         for _ in 0..300 {
             let sf = f.s_front(slot).unwrap();
             // A standing leader whose back is 3 m past the junction's exit.
@@ -559,11 +543,7 @@ mod tests {
         // needs (body 4.5 + minGap 2.5 + margin 1 m past the exit), yet it
         // moves, so the vehicle is not held at the line: it follows
         // through the junction, never closer than the standstill margin.
-        let (mut f, t) = fleet_on(road(Some((0, 0)), false));
-        f.set_signal(0, &[Signal::Priority]).unwrap();
-        let slot = f
-            .add_vehicle(t, None, None, body(), at(180.0, 3.0), None)
-            .unwrap() as i64;
+        let (mut f, slot) = before_light(Signal::Priority, 180.0, 3.0);
         let mut closest = f64::INFINITY;
         for k in 0..200 {
             let back = 211.0 + 0.3 * k as f64 * DT;

@@ -66,6 +66,17 @@ pub(crate) fn fleet_on(route: (Path, Route)) -> (RouteFleet, i64) {
     fleet_with(route, TrafficSettings::default())
 }
 
+/// One vehicle at `x` (rear axle) and `v` on `road(Some((0, 0)), false)`,
+/// the light's one link showing `signal`.
+pub(crate) fn before_light(signal: Signal, x: f64, v: f64) -> (RouteFleet, i64) {
+    let (mut f, t) = fleet_on(road(Some((0, 0)), false));
+    f.set_signal(0, &[signal]).unwrap();
+    let a = f
+        .add_vehicle(t, None, None, body(), at(x, v), None)
+        .unwrap() as i64;
+    (f, a)
+}
+
 /// Settings with one control step per step of `DT`.
 pub(crate) fn one_control_step() -> TrafficSettings {
     TrafficSettings {
@@ -119,6 +130,16 @@ pub(crate) struct Sim {
 }
 
 impl Sim {
+    /// The simulator's view of the whole road (lanes 10, 11, 12), nothing known yet.
+    pub(crate) fn on_road() -> Sim {
+        Sim {
+            lanes: vec![(10, 200.0), (11, 10.0), (12, 390.0 * 1.01)],
+            lane: 0,
+            pos: 0.0,
+            speed: 0.0,
+        }
+    }
+
     /// The simulator's view of the road's first lane (10, 200 m), nothing known yet.
     pub(crate) fn on_lane_10() -> Sim {
         Sim {
