@@ -25,6 +25,13 @@ use std::sync::Arc;
 /// piece shorter than this may fall between two samples).
 pub const STEADY_SAMPLE_M: f64 = 0.5;
 
+/// How many equal intervals the steady-curvature window `[from, to]` (m of
+/// arc) is sampled in: at most [`STEADY_SAMPLE_M`] apart, between 1 and 256
+/// (a window over 128 m is sampled more coarsely).
+fn steady_intervals(from: f64, to: f64) -> usize {
+    ((to - from) / STEADY_SAMPLE_M).ceil().clamp(1.0, 256.0) as usize
+}
+
 /// A path, its virtual borders and its curvature profile.
 #[derive(Debug, Clone)]
 pub struct Track {
@@ -212,7 +219,7 @@ impl Controller {
             crate::vehicle::Direction::Forward => (s_rear, s_rear + e + preview),
             crate::vehicle::Direction::Backward => (s_rear - e, s_rear + preview),
         };
-        let n = ((to - from) / STEADY_SAMPLE_M).ceil().clamp(1.0, 256.0) as usize;
+        let n = steady_intervals(from, to);
         let kappa = steady_curvature(
             (0..=n).map(|k| path.curvature_at(from + (to - from) * k as f64 / n as f64)),
         );
@@ -417,4 +424,34 @@ fn check_step_inputs(measured: &VehicleState, alpha: f64) -> Result<(), StateErr
         });
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_steady_curvature_window_is_sampled_at_most_half_a_metre_apart() {
+        for (from, to) in [
+            (100.0, 110.0),
+            (0.0, 3.2),
+            (-5.0, 5.0),
+            (1000.0, 1000.1),
+            (7.0, 70.0),
+        ] {
+            let n = steady_intervals(from, to);
+            let spacing = (to - from) / n as f64;
+            assert!(
+                n >= 1 && spacing <= STEADY_SAMPLE_M + 1e-12,
+                "{from}..{to}: {n}"
+            );
+            // And no more than needed: one interval fewer would be too far apart.
+            assert!(
+                n == 1 || (to - from) / (n - 1) as f64 > STEADY_SAMPLE_M,
+                "{from}..{to}: {n}"
+            );
+        }
+        assert_eq!(steady_intervals(0.0, 1000.0), 256);
+        assert_eq!(steady_intervals(5.0, 5.0), 1);
+    }
 }
