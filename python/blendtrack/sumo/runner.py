@@ -391,9 +391,9 @@ class SumoRun:
                 self._rebuild(act)
             else:
                 leave_own(act)
-        retry = self.tracks.retry_early_change
-        for act in self.vehicles.order:
-            if act.geo.pending_early:
+        if self.tracks.early:
+            retry = self.tracks.retry_early_change
+            for act in list(self.tracks.early.values()):
                 retry(act)
         index, lane_id = self.vehicles.index, self.tracks.lanes.id
         get_lane, get_pos = conn.get_lane_id, conn.get_lane_pos

@@ -113,6 +113,16 @@ class Tracks:
         self.lanes = Interned()
         self.edges = Interned()
         self.lights = Interned()
+        #: The vehicles whose track has a change due early (``pending_early``),
+        #: by id: ``retry_early_change`` looks at these only.
+        self.early: dict[str, Active] = {}
+
+    def note_track(self, act: Active) -> None:
+        """``act`` has a new track (``act.geo``): keeps ``early`` up to date."""
+        if act.geo.pending_early:
+            self.early[act.vid] = act
+        else:
+            self.early.pop(act.vid, None)
 
     def geometry(
         self, edges: tuple[str, ...], lane_index: int, change: tuple[float, float] | tuple[float, float, int] | None = None
@@ -269,6 +279,7 @@ class Tracks:
         old, act.own_track = act.own_track, (track if owned else None)
         left, act.track = act.track, track
         act.geo = geo
+        self.note_track(act)
         if not owned:
             self.enter(track)
         if old is not None and old != track:

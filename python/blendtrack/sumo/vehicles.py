@@ -164,6 +164,7 @@ class Controlled:
             act.trajectory = []
             self.tracing[vid] = act
         self.active[vid] = act
+        self.tracks.note_track(act)
         self._dirty = True
         self.read_position.add(vid)
         v.setSpeedMode(vid, 0)
@@ -175,6 +176,7 @@ class Controlled:
         record, and unless it arrived or the run ended SUMO drives it again."""
         act = self.active.pop(vid, None)
         self.read_position.discard(vid)
+        self.tracks.early.pop(vid, None)
         if act is None:
             return
         self._dirty = True
