@@ -717,3 +717,27 @@ def test_a_leader_on_the_tracks_way_is_taken_when_sumo_has_the_vehicle_beside_it
     # On a normal lane too.
     v.cars["me"]["lane"] = "in_1"
     assert j.leader_on_track("me", track, far) == far
+
+
+def test_a_leader_counts_when_the_vehicle_is_on_an_edge_without_the_target_lane() -> None:
+    """During a change SUMO can have the vehicle on the next edge, which may
+    not have the target lane's index: sumolib's ``getLane`` then raises
+    IndexError (a run at Eccles ended on it). The leader counts: not left
+    behind, and no exception."""
+    from blendtrack.sumo.tracks import Active
+
+    class Net(FakeNet):
+        def getLane(self, lane_id: str) -> FakeLane:
+            edge, _, index = lane_id.rpartition("_")
+            if edge == "f" and int(index) >= 2:
+                raise IndexError("list index out of range")
+            return super().getLane(lane_id)
+
+    conn = FakeConn()
+    conn.vehicle.add("me", speed=0.0, lat=0.0, lane="f_1", lane_index=1)
+    conn.vehicle.add("lead", speed=0.0)
+    lcs = lane_changes(conn)
+    net = Net({"f_0": FakeLane(100.0), "f_1": FakeLane(100.0)})
+    lcs.network = SimpleNamespace(net=lambda: net)  # type: ignore[assignment]
+    act = Active("me", 0, None, "", None, changing=(1, 3), change_span=(10.0, 20.0), change_from=1)  # type: ignore[arg-type]
+    assert lcs.left_behind(act, ("lead", 30.0)) is False

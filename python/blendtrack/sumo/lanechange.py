@@ -162,8 +162,11 @@ class LaneChanges:
         try:
             lane = net.getLane(lane_id)
             spacing = 0.5 * (float(lane.getWidth()) + float(net.getLane(f"{edge}_{act.changing[1]}").getWidth()))
-        except (KeyError, AttributeError):
-            return False  # not on the edge the change is on (a junction lane): the leader counts
+        except (KeyError, AttributeError, IndexError):
+            # Not on the edge the change is on (a junction lane, or an edge
+            # without the target lane's index: sumolib raises IndexError,
+            # which ended a run at Eccles): the leader counts.
+            return False
         # Where the front axle is when the front bumper reaches the leader's
         # back (SUMO's gap leaves out minGap): the offset the change has there.
         back = float(v.getLanePosition(vid)) + gap + float(v.getMinGap(vid))
