@@ -659,6 +659,16 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_straight_corridor_simplifies_to_its_two_ends_a_curved_one_keeps_more() {
+        let cfg = ControllerConfig::default();
+        let straight = Corridor::new(&Path::straight(100.0, 1.0).unwrap(), &cfg);
+        assert_eq!(straight.simplified_len(), (2, 2));
+        // A circle's borders bend everywhere: many vertices stay.
+        let (l, r) = Corridor::new(&Path::circle(20.0, 0.01).unwrap(), &cfg).simplified_len();
+        assert!(l > 8 && r > 8, "{l}, {r}");
+    }
+
+    #[test]
     fn simplify_keeps_vertices_that_fold_back_beyond_the_chord() {
         // All on the x axis: (12, 0) lies on the line of the chord from
         // (0, 0) to (10, 0), 0 m from it, but beyond its end; (5, 0) is on

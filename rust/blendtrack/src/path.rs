@@ -1114,6 +1114,40 @@ fn buckets(s: &[f64], length: f64) -> Vec<u32> {
 mod tests {
 
     #[test]
+    fn an_open_path_at_and_past_its_end_stays_on_its_last_segment() {
+        // 100 m in 1 m segments: s = 100 is the end of segment 99, and
+        // beyond it the last segment extrapolates.
+        let p = Path::straight(100.0, 1.0).unwrap();
+        let last = p.n_segments() - 1;
+        for s in [99.5, 100.0, 103.0] {
+            assert_eq!(p.segment_at(s), last, "s = {s}");
+            let q = p.point_at(s);
+            assert!((q.x - s).abs() < 1e-9 && q.y.abs() < 1e-9, "s = {s}: {q}");
+        }
+    }
+
+    #[test]
+    fn a_foot_at_the_closing_vertex_is_at_arc_length_zero() {
+        // A closed square, 40 m a side: the closing segment ends where the
+        // path starts. A point outside that corner, searched from the
+        // closing segment, has its foot at the corner: arc length 0 (the
+        // closing segment's end), not the lap's length or anything past it.
+        let sq = Path::new(
+            &[[0.0, 0.0], [40.0, 0.0], [40.0, 40.0], [0.0, 40.0]],
+            None,
+            true,
+        )
+        .unwrap();
+        let pr = sq.project_hinted(&Point2::new(-3.0, -4.0), sq.length() - 1.0);
+        assert!(
+            (pr.foot - Point2::new(0.0, 0.0)).norm() < 1e-9,
+            "{:?}",
+            pr.foot
+        );
+        assert!(pr.s.abs() < 1e-9, "s = {}", pr.s);
+    }
+
+    #[test]
     fn arc_delta_of_half_a_lap_is_forward_either_way() {
         // The shortest way round is in (-L/2, L/2]: exactly half a lap is
         // +L/2 whichever end it is measured from.
