@@ -425,6 +425,18 @@ def test_internal_junction_busy_with_a_foe_inside_or_near() -> None:
     assert j.internal_junction_busy("me", ":j_w")
     v.cars["o"]["pos"] = 45.0 - 1e-3
     assert not j.internal_junction_busy("me", ":j_w")
+    # Standing 5 m or nearer to its line: busy, unless it is a controlled
+    # vehicle told last step to wait there (it waits for the vehicles
+    # inside the junction: the two had waited for each other for good).
+    v.cars["o"]["pos"] = 49.0
+    assert j.internal_junction_busy("me", ":j_w")
+    j.waiting = {"o"}
+    assert not j.internal_junction_busy("me", ":j_w")
+    v.cars["o"]["speed"] = 0.5  # moving off: about to enter
+    assert j.internal_junction_busy("me", ":j_w")
+    v.cars["o"]["speed"] = 0.0
+    j.new_step()  # nobody was told to wait in the step before
+    assert j.internal_junction_busy("me", ":j_w")
 
 
 def test_internal_junction_busy_reads_the_foes_light() -> None:

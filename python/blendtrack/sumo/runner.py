@@ -349,6 +349,7 @@ class SumoRun:
             self.stops.update()
         ids, order, fleet = self.vehicles.ids, self.vehicles.order, self.fleet
         queries = fleet.plan_sumo(self.vehicles.slots, leaders, self.conn.step_speed, read, lanes, poss, asked, soft).tolist()
+        self.junctions.new_step()
         must_yield = self.junctions.must_yield
         answers = [must_yield(ids[i], order[i].slot) for i in queries]
         out = fleet.step(np.array(answers, dtype=bool), self.conn.dt)
