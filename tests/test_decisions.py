@@ -437,6 +437,19 @@ def test_internal_junction_busy_with_a_foe_inside_or_near() -> None:
     v.cars["o"]["speed"] = 0.0
     j.new_step()  # nobody was told to wait in the step before
     assert j.internal_junction_busy("me", ":j_w")
+    # One of SUMO's drivers standing there whose next link SUMO says lacks
+    # priority with a foe approaching (this vehicle in the junction): held.
+    # (lane, has priority, is open, has foe, via, state, direction, length)
+    v.links["o"] = [("out_0", False, True, True, ":j_foe", "m", "s", 5.0)]
+    assert not j.internal_junction_busy("me", ":j_w")
+    v.links["o"] = [("out_0", False, True, False, ":j_foe", "m", "s", 5.0)]  # no foe: it goes
+    assert j.internal_junction_busy("me", ":j_w")
+    v.links["o"] = [("out_0", True, True, True, ":j_foe", "M", "s", 5.0)]  # priority: it goes
+    assert j.internal_junction_busy("me", ":j_w")
+    # A controlled vehicle is never judged by SUMO's word, only by blendtrack's.
+    v.links["o"] = [("out_0", False, True, True, ":j_foe", "m", "s", 5.0)]
+    j.controlled = {"o": None}
+    assert j.internal_junction_busy("me", ":j_w")
 
 
 def test_internal_junction_busy_reads_the_foes_light() -> None:

@@ -72,6 +72,8 @@ class Junctions:
         #: this step's so far (``new_step`` moves them over).
         self.waiting: set[str] = set()
         self._waiting_now: set[str] = set()
+        #: The controlled vehicles (the runner's dict of them, by id).
+        self.controlled: Any = {}
 
     def new_step(self) -> None:
         """This step's yield answers begin: last step's waiters are known."""
@@ -260,6 +262,21 @@ class Junctions:
                     return True
         return False
 
+    def _held_at_line(self, other: str) -> bool:
+        """Is ``other`` (standing) held at its stop line: a controlled
+        vehicle blendtrack told to wait last step, or one of SUMO's drivers
+        whose next link SUMO says lacks priority with a foe (the rule
+        ``must_yield`` applies to controlled vehicles)?"""
+        if other in self.waiting:
+            return True
+        if other in self.controlled:
+            return False
+        try:
+            links = self.conn.sumo.vehicle.getNextLinks(other)
+        except Exception:
+            return False
+        return bool(links) and not links[0][1] and bool(links[0][3])
+
     def forget(self, vid: str) -> None:
         """``vid`` is no longer controlled."""
         self.halted.pop(vid, None)
@@ -358,13 +375,13 @@ class Junctions:
                     continue
                 dist = length - veh.getLanePosition(other)
                 speed = float(veh.getSpeed(other))
-                if other in self.waiting and speed < HALT_SPEED_MPS:
-                    # A controlled vehicle standing at its line, told to
-                    # wait (for this vehicle inside the junction, among
-                    # others): it does not enter while this one is in
-                    # there. Counted as about to enter, the two waited for
-                    # each other until SUMO teleported them (Bologna,
-                    # junction 50: 300 s, in two of three seeds).
+                if speed < HALT_SPEED_MPS and self._held_at_line(other):
+                    # Standing at its line and held there (for this vehicle
+                    # inside the junction, among others): it does not enter
+                    # while this one is in there. Counted as about to
+                    # enter, the two waited for each other until SUMO
+                    # teleported them (Bologna, junctions 50 and 51: 300 s,
+                    # in each of three seeds).
                     continue
                 if yellow:
                     # At yellow a foe stops only if it can: one too close
