@@ -332,6 +332,18 @@ def _pieces(
             run += float(cur.getLength())
         return False
 
+    def change_target(lane: Any, k: int) -> Any:
+        """The lane of edge ``k`` a change from ``lane`` goes to: the
+        nearest that leads on to edge ``k + 1``, one needing no later change
+        first."""
+        able = [ln for ln in objs[k].getLanes() if conns_to(ln, k + 1)]
+        if not able:
+            raise PathError(
+                f"no lane of edge {edges[k]!r} connects to edge {edges[k + 1]!r}: the route is not drivable"
+            )
+        best = [ln for ln in able if ln.getID() in no_change[k]] or able
+        return min(best, key=lambda ln: abs(ln.getIndex() - lane.getIndex()))
+
     out: list[_Piece] = []
     # A change due early on a lane that goes on: (edge index, target lane index).
     early: tuple[int, int] | None = None
@@ -365,9 +377,7 @@ def _pieces(
             # 123 m edge, one stood 80 s and its lane queued behind it); the
             # change is tried on this edge, then on the next ones.
             if early is None:
-                able = [ln for ln in objs[k].getLanes() if conns_to(ln, k + 1)]
-                best = [ln for ln in able if ln.getID() in no_change[k]] or able
-                early = (k, min(best, key=lambda ln: abs(ln.getIndex() - lane.getIndex())).getIndex())
+                early = (k, change_target(lane, k).getIndex())
             out.append(piece(lane))
         elif not cs and defer_changes and early is not None:
             # Where the lane ends for the route after an early change was due.
@@ -378,13 +388,7 @@ def _pieces(
             pass
         elif not cs or change_early(lane, k):
             # Change to the nearest lane of this edge that continues.
-            able = [ln for ln in objs[k].getLanes() if conns_to(ln, k + 1)]
-            if not able:
-                raise PathError(
-                    f"no lane of edge {edges[k]!r} connects to edge {edges[k + 1]!r}: the route is not drivable"
-                )
-            best = [ln for ln in able if ln.getID() in no_change[k]] or able
-            target = min(best, key=lambda ln: abs(ln.getIndex() - lane.getIndex()))
+            target = change_target(lane, k)
             if k == 0 and change is not None:
                 out.extend(_lane_change_pieces(lane, target, spacing_m, change[0], change[1]))
             elif defer_changes:

@@ -49,11 +49,17 @@ HALT_NEAR_M = 3.0
 INSIDE_MARGIN_M = 0.3
 
 
+def lacks_priority(link: Any) -> bool:
+    """SUMO's word on a link of ``getNextLinks`` (lane, has priority, is
+    open, has foe, via, ...): no priority, and a foe approaching."""
+    return (not link[1]) and bool(link[3])
+
+
 class Junctions:
     """Yield answers for ``RouteFleet.plan_sumo``'s questions, and the lights' states."""
 
     def __init__(self, conn: SumoConnection, network: Network, tracks: Tracks, fleet: RouteFleet, plan_decel: float,
-                 plan_accel: float = 1.0) -> None:
+                 plan_accel: float = 1.0, controlled: Any = None) -> None:
         self.conn = conn
         self.network = network
         self.tracks = tracks
@@ -73,7 +79,7 @@ class Junctions:
         self.waiting: set[str] = set()
         self._waiting_now: set[str] = set()
         #: The controlled vehicles (the runner's dict of them, by id).
-        self.controlled: Any = {}
+        self.controlled: Any = {} if controlled is None else controlled
 
     def new_step(self) -> None:
         """This step's yield answers begin: last step's waiters are known."""
@@ -141,7 +147,7 @@ class Junctions:
             for link in (() if state == "w" else self.conn.sumo.vehicle.getNextLinks(vid)):
                 # (lane, has priority, is open, has foe, via lane, state, direction, length)
                 if link[4] == via:
-                    if (not link[1]) and bool(link[3]):
+                    if lacks_priority(link):
                         return True
                     break
             inner, offset = self.network.waiting_point_after(via)
@@ -275,7 +281,7 @@ class Junctions:
             links = self.conn.sumo.vehicle.getNextLinks(other)
         except Exception:
             return False
-        return bool(links) and not links[0][1] and bool(links[0][3])
+        return bool(links) and lacks_priority(links[0])
 
     def forget(self, vid: str) -> None:
         """``vid`` is no longer controlled."""

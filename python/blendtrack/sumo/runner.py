@@ -127,8 +127,7 @@ class SumoRun:
         self.records = self.vehicles.records
         self.histograms = SampleHistograms()
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel,
-                                   float(base_config.preferred_acceleration))
-        self.junctions.controlled = self.active
+                                   float(base_config.preferred_acceleration), controlled=self.active)
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel,
                                  float(base_config.preferred_acceleration))
         self.stops = Stops(self.conn, self.fleet, self.network, self.tracks.lanes)

@@ -227,18 +227,7 @@ class Tracks:
         built from there put it a lane over. True when it was moved."""
         if act.own_track is None or act.changing is not None:
             return False
-        slot = act.slot
-        lane_id, pos = self.fleet.front_lane_position(slot)
-        lane = self.lanes.names[lane_id]
-        edge, _, index = lane.rpartition("_")
-        k = self.fleet.occurrence(slot)
-        edges = act.geo.edges
-        if lane.startswith(":") or k == 0 or k >= len(edges) or edges[k] != edge or not index.isdigit() or pos < SHARE_AFTER_M:
-            return False
-        geo, track = self.geometry(edges[k:], int(index))
-        base = act.route_base + k
-        self.retrack(act, geo, track, owned=False, base=base, route_index=base)
-        return True
+        return self._onto_shared_track(act, 1)
 
     def retry_early_change(self, act: Active) -> bool:
         """A vehicle whose track has a change due early (``pending_early``)
@@ -249,19 +238,26 @@ class Tracks:
         geo = act.geo
         if not geo.pending_early or geo.pending_change is None or act.changing is not None or act.own_track is not None:
             return False
+        return self._onto_shared_track(act, geo.pending_change[0] + 1)
+
+    def _onto_shared_track(self, act: Active, first_edge: int) -> bool:
+        """Puts ``act`` on the shared track of its route from the lane it is
+        on, once blendtrack has its front ``SHARE_AFTER_M`` into a normal
+        lane of its track's edge ``first_edge`` or a later one. True when it
+        was moved."""
         slot = act.slot
         k = self.fleet.occurrence(slot)
-        edges = geo.edges
-        if k <= geo.pending_change[0] or k >= len(edges):
+        edges = act.geo.edges
+        if k < first_edge or k >= len(edges):
             return False
         lane_id, pos = self.fleet.front_lane_position(slot)
         lane = self.lanes.names[lane_id]
         edge, _, index = lane.rpartition("_")
         if lane.startswith(":") or edges[k] != edge or not index.isdigit() or pos < SHARE_AFTER_M:
             return False
-        new_geo, track = self.geometry(edges[k:], int(index))
+        geo, track = self.geometry(edges[k:], int(index))
         base = act.route_base + k
-        self.retrack(act, new_geo, track, owned=False, base=base, route_index=base)
+        self.retrack(act, geo, track, owned=False, base=base, route_index=base)
         return True
 
     def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool, base: int, route_index: int | None = None) -> None:
