@@ -108,9 +108,8 @@ class PlacementCheck:
         ``placed``: the ones placed by lane position or (x, y)), and which
         of them are off their lane."""
         self._placed = [ids[i] for i in np.flatnonzero(placed).tolist()]
-        front = self._front
-        for i, x, y in zip(np.flatnonzero(usable).tolist(), out["x_front_m"][usable].tolist(), out["y_front_m"][usable].tolist()):
-            front[ids[i]] = (x, y)
+        moved = map(ids.__getitem__, np.flatnonzero(usable).tolist())
+        self._front.update(zip(moved, zip(out["x_front_m"][usable].tolist(), out["y_front_m"][usable].tolist())))
         # Past the route's end the track has ended: the "lateral error" is
         # the distance past its last point, and SUMO is about to let it arrive.
         off = usable & ~out["past_route_end"] & (np.abs(out["lateral_error_m"]) > self.lane_widths(out["lane"]))
@@ -136,16 +135,22 @@ class PlacementCheck:
                 continue
         self._placed = []
         seen = {vid for vid, _ in found}
-        get_position = vehicle.getPosition
         front = self._front
-        for vid in ids:
-            mine = front.get(vid)
-            if mine is None or vid in seen:
-                continue
-            try:
-                x, y = get_position(vid)
-            except Exception:
-                continue
-            if math.hypot(x - mine[0], y - mine[1]) > JUMP_M:
-                found.append((vid, "jump"))
+        checked = [vid for vid in ids if vid in front and vid not in seen]
+        if not checked:
+            return found
+        get_position = vehicle.getPosition
+        try:
+            theirs = list(map(get_position, checked))
+        except Exception:
+            # One is gone (the caller's check for vanished ones finds it): the others one by one.
+            theirs = []
+            for vid in checked:
+                try:
+                    theirs.append(get_position(vid))
+                except Exception:
+                    theirs.append((front[vid][0], front[vid][1]))
+        a, b = np.array(theirs, dtype=float), np.array([front[vid] for vid in checked], dtype=float)
+        jumped = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) > JUMP_M
+        found.extend((checked[i], "jump") for i in np.flatnonzero(jumped).tolist())
         return found

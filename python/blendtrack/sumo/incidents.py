@@ -150,20 +150,24 @@ class Incidents:
     def _crossings(self, t: float, ids: list[str], acts: list[Any]) -> None:
         get_lane = self.conn.sumo.vehicle.getLaneID
         before = self._lane
-        now: dict[str, str] = {}
-        for i, vid in enumerate(ids):
-            try:
-                lane = get_lane(vid)
-            except Exception:
-                continue  # gone; dropped by the runner
-            now[vid] = lane
-            prev = before.get(vid)
-            if prev is None or prev == lane or prev.startswith(":") or not lane:
+        try:
+            lanes: list[str | None] = list(map(get_lane, ids))
+        except Exception:
+            # One is gone (dropped by the runner): the others one by one.
+            lanes = []
+            for vid in ids:
+                try:
+                    lanes.append(get_lane(vid))
+                except Exception:
+                    lanes.append(None)
+        self._lane = {vid: lane for vid, lane in zip(ids, lanes) if lane is not None}
+        for i in [i for i, (vid, lane) in enumerate(zip(ids, lanes)) if lane and before.get(vid, lane) != lane]:
+            prev, now = before[ids[i]], lanes[i]
+            if prev.startswith(":") or now is None:
                 continue
-            link = self._link(prev, lane)
+            link = self._link(prev, now)
             if link is not None:
-                self._check(t, vid, acts[i].record, *link)
-        self._lane = now
+                self._check(t, ids[i], acts[i].record, *link)
 
     def _check(self, t: float, vid: str, record: Any, tls: str, index: int) -> None:
         """A crossing of ``tls``'s link ``index``: red only if the link was red

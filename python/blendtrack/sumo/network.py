@@ -39,6 +39,11 @@ class Network:
         self._prohibitors: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
         self._states: dict[str, str] = {}
         self._conflicts: dict[tuple[str, str], tuple[float, float]] = {}
+        self._from_lanes: dict[str, str | None] = {}
+        #: Per node (by id): each of its connections' link index (sumolib's
+        #: ``Node.getLinkIndex``, which walks the node's connections anew on
+        #: every call).
+        self._link_indices: dict[str, dict[Any, int]] = {}
 
     def net(self) -> Any:
         """The sumolib network."""
@@ -63,8 +68,12 @@ class Network:
     def from_lane(self, via: str) -> str | None:
         """The lane the connection through junction lane ``via`` leaves
         from (None for a lane of no connection)."""
-        c = self.connection_of(via)
-        return None if c is None else str(c.getFromLane().getID())
+        try:
+            return self._from_lanes[via]
+        except KeyError:
+            c = self.connection_of(via)
+            hit = self._from_lanes[via] = None if c is None else str(c.getFromLane().getID())
+            return hit
 
     def is_zipper(self, via: str) -> bool:
         """Is ``via`` a junction lane of a zipper link (state Z)?"""
@@ -149,7 +158,7 @@ class Network:
         the right; a connection from the left gives way to this one."""
         hit = self._prohibitors.get(via)
         if hit is None:
-            hit = self._prohibitors[via] = self._conflicting(via, lambda node, c, other: node.forbids(other, c))
+            hit = self._prohibitors[via] = self._conflicting(via, self._forbids)
         return hit
 
     def internal_foes(self, via: str) -> list[tuple[str, str | None, float, str, int]]:
@@ -162,11 +171,28 @@ class Network:
         if hit is None:
 
             def foes(node: Any, c: Any, other: Any) -> bool:
-                i, j = node.getLinkIndex(c), node.getLinkIndex(other)
+                i, j = self._link_index(node, c), self._link_index(node, other)
                 return i >= 0 and j >= 0 and bool(node.areFoes(i, j))
 
             hit = self._foes[via] = self._conflicting(via, foes)
         return hit
+
+    def _link_index(self, node: Any, c: Any) -> int:
+        """``node.getLinkIndex(c)``, computed once per node for all its connections."""
+        indices = self._link_indices.get(node.getID())
+        if indices is None:
+            indices = self._link_indices[node.getID()] = {other: node.getLinkIndex(other) for other in node.getConnections()}
+        hit = indices.get(c)
+        return node.getLinkIndex(c) if hit is None else hit
+
+    def _forbids(self, node: Any, c: Any, other: Any) -> bool:
+        """sumolib's ``node.forbids(other, c)`` (does ``other`` prohibit
+        ``c`` by the right-of-way matrix?) with the link indices cached."""
+        prohibitor, prohibited = self._link_index(node, other), self._link_index(node, c)
+        if prohibitor < 0 or prohibited < 0:
+            return False
+        # What ``Node.forbids`` reads, by the indices it would compute.
+        return bool(node._prohibits[prohibited][-(prohibitor + 1)] == "1")
 
     def _conflicting(self, via: str, conflicts: Any) -> list[tuple[str, str | None, float, str, int]]:
         """The junction lanes of the connections ``other`` of ``via``'s
