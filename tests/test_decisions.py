@@ -95,6 +95,9 @@ class FakeConn:
     def get_speed(self, vid: str) -> float:
         return self.vehicle.getSpeed(vid)
 
+    def get_lane_pos(self, vid: str) -> float:
+        return self.vehicle.getLanePosition(vid)
+
 
 class FakeLane:
     def __init__(self, length: float, width: float = 3.2, n_lanes: int = 3) -> None:

@@ -115,6 +115,7 @@ class SumoConnection:
         self.get_accel: Any = None
         self.get_lane_id: Any = None
         self.get_lane_pos: Any = None
+        self.get_position: Any = None
         self.get_route_id: Any = None
         self.set_speed: Any = None
         self.move_to: Any = None
@@ -256,6 +257,7 @@ class SumoConnection:
         self.get_accel = pick("getAcceleration")
         self.get_lane_id = pick("getLaneID")
         self.get_lane_pos = pick("getLanePosition")
+        self.get_position = pick("getPosition")
         self.get_route_id = pick("getRouteID")
         self.set_speed = pick("setSpeed")
         self.move_to = pick("moveTo")

@@ -118,11 +118,12 @@ class PlacementCheck:
     def forget(self, vid: str) -> None:
         self._front.pop(vid, None)
 
-    def faults(self, ids: list[str], vehicle: Any, route_indices: Any) -> list[tuple[str, str]]:
+    def faults(self, ids: list[str], vehicle: Any, route_indices: Any, get_position: Any = None) -> list[tuple[str, str]]:
         """(vehicle, what) of the vehicles ``ids`` with a placement fault now:
         SUMO has the front more than JUMP_M from blendtrack's, last step left
         it off its lane, or (for the ones placed) SUMO's route index is not
-        one of ``route_indices(vid)``. ``vehicle``: SUMO's vehicle domain. A
+        one of ``route_indices(vid)``. ``vehicle``: SUMO's vehicle domain
+        (``get_position``: its ``getPosition``, or a faster binding of it). A
         vehicle SUMO no longer knows is left to the caller's check for
         vanished ones."""
         found = [(vid, "off its lane") for vid in self._off_lane]
@@ -139,7 +140,7 @@ class PlacementCheck:
         checked = [vid for vid in ids if vid in front and vid not in seen]
         if not checked:
             return found
-        get_position = vehicle.getPosition
+        get_position = vehicle.getPosition if get_position is None else get_position
         try:
             theirs = list(map(get_position, checked))
         except Exception:

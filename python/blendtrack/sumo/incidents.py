@@ -148,7 +148,7 @@ class Incidents:
         return max(decel + self._threshold * max(emergency - decel, 0.0) - BRAKE_EPS_MPS2, decel + BRAKE_EPS_MPS2)
 
     def _crossings(self, t: float, ids: list[str], acts: list[Any]) -> None:
-        get_lane = self.conn.sumo.vehicle.getLaneID
+        get_lane = self.conn.get_lane_id or self.conn.sumo.vehicle.getLaneID
         before = self._lane
         try:
             lanes: list[str | None] = list(map(get_lane, ids))

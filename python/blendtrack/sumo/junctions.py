@@ -173,7 +173,7 @@ class Junctions:
                     return True
         return self.junction_blocked(vid, via)
 
-    def leader_beyond(self, vid: str, track_lanes: list[str]) -> tuple[str, float] | None:
+    def leader_beyond(self, vid: str, track_lanes: list[str], lane: str | None = None) -> tuple[str, float] | None:
         """The leader of ``vid`` when it is on a junction lane and ``getLeader``
         found none: the nearest vehicle on the rest of its way through the
         junction (its connection's junction lanes, then the lane it leads to),
@@ -184,8 +184,10 @@ class Junctions:
         controlled vehicle behind it said None, and it drove into it). SUMO
         may have the vehicle on the lane beside its track's on the same
         junction edge (its own choice of lane at the entry; the track's
-        ``track_lanes`` come next): the way ahead is then the track's lane's."""
-        lane = self.conn.get_lane_id(vid)
+        ``track_lanes`` come next): the way ahead is then the track's lane's.
+        ``lane``: SUMO's lane of ``vid``, when already read this step."""
+        if lane is None:
+            lane = self.conn.get_lane_id(vid)
         if not lane.startswith(":"):
             return None
         return self._leader_on_way(vid, lane, lane not in track_lanes, track_lanes)
@@ -216,7 +218,7 @@ class Junctions:
             dist += length
         return None
 
-    def leader_on_track(self, vid: str, track_lanes: list[str], lead: Any) -> Any:
+    def leader_on_track(self, vid: str, track_lanes: list[str], lead: Any, lane: str | None = None) -> Any:
         """``lead`` (``getLeader``'s answer for ``vid``, found) or, when SUMO
         has ``vid`` on a junction lane beside its track's, the nearest
         vehicle on the track's way through the junction if that is nearer.
@@ -224,8 +226,10 @@ class Junctions:
         the same junction edge for a step, and ``getLeader`` then looks
         along that lane's connection (traced on Bologna: 25.9 m to a vehicle
         on another lane, the vehicle 15.9 m ahead on its own way unseen for
-        the step; it sped up and then stood inside the minGap of that one)."""
-        lane = self.conn.get_lane_id(vid)
+        the step; it sped up and then stood inside the minGap of that one).
+        ``lane``: as for ``leader_beyond``."""
+        if lane is None:
+            lane = self.conn.get_lane_id(vid)
         if not lane.startswith(":") or lane in track_lanes:
             return lead
         own = self._leader_on_way(vid, lane, True, track_lanes)
@@ -247,6 +251,7 @@ class Junctions:
         if not lanes:
             return False
         veh = self.conn.sumo.vehicle
+        get_speed, get_pos, vehicles_on = self.conn.get_speed, self.conn.get_lane_pos, self.conn.vehicles_on
         reach = 0.5 * float(veh.getWidth(vid)) + INSIDE_MARGIN_M
         origin = self.network.from_lane(via)
         for lane in lanes:
@@ -256,11 +261,11 @@ class Junctions:
             # a straight-on vehicle behind left turners crossed a green light
             # only after each of them (Bologna, 204c).
             same = origin is not None and self.network.from_lane(lane) == origin
-            for other in self.conn.vehicles_on(lane):
+            for other in vehicles_on(lane):
                 if other == vid:
                     continue
-                if same and float(veh.getSpeed(other)) >= HALT_SPEED_MPS \
-                        and float(veh.getLanePosition(other)) >= float(veh.getLength(other)):
+                if same and float(get_speed(other)) >= HALT_SPEED_MPS \
+                        and float(get_pos(other)) >= float(veh.getLength(other)):
                     continue
                 body, half = body_segment(veh, other)
                 if segments_distance(body, path) < reach + half:
@@ -322,8 +327,8 @@ class Junctions:
         if not foes:
             return False
         veh = self.conn.sumo.vehicle
-        vehicles_on = self.conn.vehicles_on
-        v = max(float(veh.getSpeed(vid)), 0.0)
+        vehicles_on, get_speed, get_pos = self.conn.vehicles_on, self.conn.get_speed, self.conn.get_lane_pos
+        v = max(float(get_speed(vid)), 0.0)
         gap = max(stop_s - self.fleet.s_front(slot), 0.0)
         length = float(veh.getLength(vid))
         a = self.plan_accel
@@ -344,8 +349,8 @@ class Junctions:
             for other in vehicles_on(incoming):
                 if other == vid:
                     continue
-                d = lane_length - float(veh.getLanePosition(other)) + theirs - CONFLICT_CLEAR_M
-                if d < INTERNAL_YIELD_NEAR_M or d < t_cross * float(veh.getSpeed(other)):
+                d = lane_length - float(get_pos(other)) + theirs - CONFLICT_CLEAR_M
+                if d < INTERNAL_YIELD_NEAR_M or d < t_cross * float(get_speed(other)):
                     return True
         return False
 
@@ -362,8 +367,7 @@ class Junctions:
         (``INTERNAL_YIELD_S`` at the point) or ``INTERNAL_YIELD_NEAR_M``
         metres of the stop line.
         """
-        veh = self.conn.sumo.vehicle
-        vehicles_on = self.conn.vehicles_on
+        vehicles_on, get_speed, get_pos = self.conn.vehicles_on, self.conn.get_speed, self.conn.get_lane_pos
         for foe, incoming, length, tls, link in (self.network.internal_foes(via) if foes is None else foes):
             if any(other != vid for other in vehicles_on(foe)):
                 return True
@@ -379,8 +383,8 @@ class Junctions:
             for other in vehicles_on(incoming):
                 if other == vid:
                     continue
-                dist = length - veh.getLanePosition(other)
-                speed = float(veh.getSpeed(other))
+                dist = length - get_pos(other)
+                speed = float(get_speed(other))
                 if speed < HALT_SPEED_MPS and self._held_at_line(other):
                     # Standing at its line and held there (for this vehicle
                     # inside the junction, among others): it does not enter

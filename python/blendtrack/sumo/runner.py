@@ -328,7 +328,7 @@ class SumoRun:
         if self.stops.pending:
             dwelling = self.stops.dwelling()
             checked = [vid for vid in checked if vid not in dwelling]
-        for vid, what in self.placement.faults(checked, self.conn.sumo.vehicle, self._route_indices):
+        for vid, what in self.placement.faults(checked, self.conn.sumo.vehicle, self._route_indices, self.conn.get_position):
             # Not where blendtrack put it: SUMO's again, and counted (issue 18).
             if vid in self.active and not (what == "route index" and self._repair_route_index(vid)):
                 self.counts["placement_faults"] += 1
@@ -436,11 +436,17 @@ class SumoRun:
         get_leader = self.conn.get_leader
         leaders = [get_leader(ids[i], LEADER_RANGE_M) for i in ask]
         order, junctions = self.vehicles.order, self.junctions
+        get_lane = self.conn.get_lane_id
         for k, i in enumerate(ask):
-            if not leaders[k] or not leaders[k][0]:
-                leaders[k] = junctions.leader_beyond(ids[i], order[i].geo.piece_lane)
+            # Only a vehicle on a junction lane needs a second look.
+            lane = get_lane(ids[i])
+            if not lane.startswith(":"):
+                if not leaders[k] or not leaders[k][0]:
+                    leaders[k] = None
+            elif not leaders[k] or not leaders[k][0]:
+                leaders[k] = junctions.leader_beyond(ids[i], order[i].geo.piece_lane, lane)
             else:
-                leaders[k] = junctions.leader_on_track(ids[i], order[i].geo.piece_lane, leaders[k])
+                leaders[k] = junctions.leader_on_track(ids[i], order[i].geo.piece_lane, leaders[k], lane)
         return ask, self.sumo_leaders.correct(leaders)
 
     # ------------------------------------------------------------------ apply
