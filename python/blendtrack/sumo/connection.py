@@ -11,7 +11,7 @@ import math
 import os
 import tempfile
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.scenario import Scenario, ScenarioError
@@ -122,8 +122,11 @@ class SumoConnection:
         self.move_to_xy: Any = None
         self.lane_change_state: Any = None
         self.lane_vehicles: Any = None
-        #: Lanes' vehicle lists read this step (several vehicles ask about one junction).
-        self._lane_ids: dict[str, Any] = {}
+        self._lane_ids = _OnLane(self)
+        #: SUMO's list of the vehicles on a lane this step, read once a step
+        #: (several vehicles ask about the lanes of one junction): the
+        #: cache's own ``__getitem__``, so a repeat costs a dict look-up.
+        self.vehicles_on: Callable[[str], Any] = self._lane_ids.__getitem__
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
 
     def _sumo_dir(self) -> Path:
@@ -345,15 +348,7 @@ class SumoConnection:
 
     def new_step(self) -> None:
         """A new control step: the per-step caches start empty."""
-        self._lane_ids = {}
-
-    def vehicles_on(self, lane: str) -> Any:
-        """SUMO's list of the vehicles on ``lane`` this step, read once a step
-        (several vehicles ask about the lanes of one junction)."""
-        ids = self._lane_ids.get(lane)
-        if ids is None:
-            ids = self._lane_ids[lane] = self.lane_vehicles(lane)
-        return ids
+        self._lane_ids.clear()
 
     def hand_back(self, vid: str) -> None:
         """SUMO's own driving for ``vid`` again (each call on its own: one
@@ -364,6 +359,18 @@ class SumoConnection:
                 call(vid, *args)
             except Exception:
                 pass
+
+
+class _OnLane(dict[str, Any]):
+    """Lane -> SUMO's list of its vehicles, read from SUMO on first use."""
+
+    def __init__(self, conn: SumoConnection) -> None:
+        super().__init__()
+        self._conn = conn
+
+    def __missing__(self, lane: str) -> Any:
+        ids = self[lane] = self._conn.lane_vehicles(lane)
+        return ids
 
 
 def override_options(base: list[str], extra: list[str]) -> list[str]:

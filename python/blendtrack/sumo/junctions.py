@@ -254,14 +254,15 @@ class Junctions:
         get_speed, get_pos, vehicles_on = self.conn.get_speed, self.conn.get_lane_pos, self.conn.vehicles_on
         reach = 0.5 * float(veh.getWidth(vid)) + INSIDE_MARGIN_M
         origin = self.network.from_lane(via)
-        for lane in lanes:
+        from_lane = self.network.from_lane
+        for lane, on in [(lane, on) for lane in lanes if (on := vehicles_on(lane))]:
             # A vehicle that entered from the same lane and drives on ahead
             # (its back past the line, at SUMO's halting speed or more) is
             # one to follow, not a foe: waiting until it had left the path,
             # a straight-on vehicle behind left turners crossed a green light
             # only after each of them (Bologna, 204c).
-            same = origin is not None and self.network.from_lane(lane) == origin
-            for other in vehicles_on(lane):
+            same = origin is not None and from_lane(lane) == origin
+            for other in on:
                 if other == vid:
                     continue
                 if same and float(get_speed(other)) >= HALT_SPEED_MPS \
