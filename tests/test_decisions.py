@@ -516,13 +516,15 @@ def test_refresh_tls_passes_on_changed_lights_only() -> None:
     assert sent == [(0, "rr")]
 
 
-def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tuple[Any, float] = (None, 0.0)) -> tuple[FakeConn, Junctions, dict[str, Any]]:
+def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tuple[Any, float] = (None, 0.0),
+                light: int = -1) -> tuple[FakeConn, Junctions, dict[str, Any]]:
     conn = FakeConn()
     conn.vehicle.add("me", speed=10.0)
     conn.vehicle.links["me"] = links
     seen: dict[str, Any] = {"busy": False, "blocked": False, "horizon": None}
-    fleet = SimpleNamespace(next_stop=lambda slot: (100.0, 0, 0, 0, 7), s_front=lambda slot: 80.0)
-    tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda k: via))
+    # The stop 100 m on: (s, light, link index 1, major, via lane 7).
+    fleet = SimpleNamespace(next_stop=lambda slot: (100.0, light, 1, 0, 7), s_front=lambda slot: 80.0)
+    tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda k: via), lights=SimpleNamespace(name=lambda k: f"tl{k}"))
     # No link state known (""): the decision rests on SUMO's getNextLinks; no zipper.
     network = SimpleNamespace(internal_vias={":j_w"}, waiting_point_after=lambda v: waiting,
                               is_zipper=lambda v: False, link_state=lambda v: "")
@@ -555,6 +557,31 @@ def test_must_yield_on_a_link_without_priority_with_foes() -> None:
     j.fleet.next_stop = lambda slot: None
     seen["blocked"] = True
     assert not j.must_yield("me", 0), "no stop ahead: nothing to yield at"
+
+
+def test_must_yield_asks_sumo_only_where_the_link_lacks_priority_now() -> None:
+    """SUMO's getNextLinks says a link has priority where its state is an
+    upper-case letter: at a light showing G for the link (this step's
+    state) it is not asked; at g (green without priority) it is, and its
+    answer counts."""
+    calls: list[str] = []
+    for shown, asked, wait in (("rGr", False, False), ("rgr", True, True), ("r", True, True)):
+        conn, j, _ = yield_setup([("in_1", False, True, True, "in_0_to")], light=3)
+        j.tls_state["tl3"] = shown
+        get_links = conn.vehicle.getNextLinks
+        calls.clear()
+        conn.vehicle.getNextLinks = lambda vid: calls.append(vid) or get_links(vid)  # type: ignore[method-assign]
+        assert j.must_yield("me", 0) is wait, shown
+        assert bool(calls) is asked, shown
+    # Without a light, by the network's state: M has priority, m does not.
+    for state, asked in (("M", False), ("m", True)):
+        conn, j, _ = yield_setup([("in_1", False, True, True, "in_0_to")])
+        j.network.link_state = lambda v, state=state: state  # type: ignore[attr-defined]
+        j.link_busy = lambda *a: False  # type: ignore[method-assign]
+        calls.clear()
+        get_links = conn.vehicle.getNextLinks
+        conn.vehicle.getNextLinks = lambda vid: calls.append(vid) or get_links(vid)  # type: ignore[method-assign]
+        assert j.must_yield("me", 0) is asked and bool(calls) is asked, state
 
 
 def test_must_yield_at_an_internal_waiting_point_asks_the_foes() -> None:

@@ -143,8 +143,11 @@ class Junctions:
             elif state and state not in "MGOZ" and self.link_busy(vid, slot, via, stop[0]):
                 return True
             # SUMO's word on foes, but not at an all-way stop, where it
-            # reports the foes halted at their lines as foes.
-            for link in (() if state == "w" else self.conn.sumo.vehicle.getNextLinks(vid)):
+            # reports the foes halted at their lines as foes, nor where the
+            # link has priority now (no need to ask: ``lacks_priority`` is
+            # False for it whatever the foes).
+            ask = state != "w" and not self._has_priority_now(stop, state)
+            for link in (self.conn.sumo.vehicle.getNextLinks(vid) if ask else ()):
                 # (lane, has priority, is open, has foe, via lane, state, direction, length)
                 if link[4] == via:
                     if lacks_priority(link):
@@ -172,6 +175,18 @@ class Junctions:
                 if v * v > 2.0 * gentle * room and self.internal_junction_busy(vid, inner, horizon):
                     return True
         return self.junction_blocked(vid, via)
+
+    def _has_priority_now(self, stop: Any, state: str) -> bool:
+        """Has the link of ``stop`` (``RouteFleet.next_stop``'s) priority
+        now, as SUMO's ``getNextLinks`` would say (a link's state an upper
+        case letter)? A signalised link by its light's state this step
+        (read anew by ``refresh_tls``), any other by the network's
+        ``state``; an unknown one is not taken to have it."""
+        light, index = stop[1], stop[2]
+        if light >= 0:
+            lights = self.tls_state.get(self.tracks.lights.name(light), "")
+            return 0 <= index < len(lights) and lights[index].isupper()
+        return state in ("M", "O", "G")
 
     def leader_beyond(self, vid: str, track_lanes: list[str], lane: str | None = None) -> tuple[str, float] | None:
         """The leader of ``vid`` when it is on a junction lane and ``getLeader``
