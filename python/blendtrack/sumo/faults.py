@@ -151,7 +151,8 @@ class PlacementCheck:
                     theirs.append(get_position(vid))
                 except Exception:
                     theirs.append((front[vid][0], front[vid][1]))
-        a, b = np.array(theirs, dtype=float), np.array([front[vid] for vid in checked], dtype=float)
-        jumped = np.hypot(a[:, 0] - b[:, 0], a[:, 1] - b[:, 1]) > JUMP_M
-        found.extend((checked[i], "jump") for i in np.flatnonzero(jumped).tolist())
+        hypot = math.hypot
+        found.extend(
+            (vid, "jump") for vid, (x, y) in zip(checked, theirs) if hypot(x - front[vid][0], y - front[vid][1]) > JUMP_M
+        )
         return found

@@ -338,6 +338,10 @@ class SumoRun:
             self.lanes.tactical_changes(self.vehicles.order, self._steps)
         if self.conn.has_tls:
             self.junctions.refresh_tls()
+        # The lanes' vehicle lists from here on are read after this step's
+        # lane changes and repairs, once, and shared by the leader look-ups
+        # and the junction checks.
+        self.conn.new_step()
         (asked, leaders), read, lanes, poss = self._observe(t)
         self.lanes.add_merge_leads(self.zippers.leaders(self.vehicles.order))
         # This step's courtesy and lining-up targets are taken (and cleared)
@@ -431,7 +435,7 @@ class SumoRun:
         of one per vehicle."""
         fleet, ids = self.fleet, self.vehicles.ids
         lanes = fleet.lanes_with_followers(self.vehicles.slots).tolist()
-        names, lane_vehicles = self.tracks.lanes.names, self.conn.lane_vehicles
+        names, lane_vehicles = self.tracks.lanes.names, self.conn.vehicles_on
         ask = fleet.leaders_on_lanes(self.vehicles.slots, lanes, [lane_vehicles(names[lane]) for lane in lanes]).tolist()
         get_leader = self.conn.get_leader
         leaders = [get_leader(ids[i], LEADER_RANGE_M) for i in ask]
