@@ -7,7 +7,7 @@ calls, plan_sumo (each vehicle's leader is the one ahead of it, a known
 slot) and step. Prints the median time per vehicle and step over several
 repetitions. A benchmark measures; it asserts nothing.
 
-    .venv/bin/python scripts/bench_route_fleet.py [--vehicles 500] [--steps 200] [--reps 5]
+    .venv/bin/python scripts/bench_route_fleet.py [--vehicles 500] [--steps 200] [--reps 5] [--dt 0.1]
 """
 
 from __future__ import annotations
@@ -57,6 +57,8 @@ def main() -> None:
     ap.add_argument("--vehicles", type=int, default=500)
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--reps", type=int, default=5)
+    ap.add_argument("--dt", type=float, default=0.1,
+                    help="the simulator's step (s); above control_dt (0.05 s) each step is several control steps")
     args = ap.parse_args()
     n = args.vehicles
     per_step: list[float] = []
@@ -66,11 +68,11 @@ def main() -> None:
         t0 = time.perf_counter()
         for _ in range(args.steps):
             q = fleet.plan_sumo(slots, leaders, lambda vid: 25.0)
-            fleet.step(np.zeros(len(q), dtype=bool), 0.1)
+            fleet.step(np.zeros(len(q), dtype=bool), args.dt)
         per_step.append((time.perf_counter() - t0) / args.steps)
     med = statistics.median(per_step)
     print(f"RouteFleet plan_sumo + step, {n} vehicles on the highway: median {med * 1e3:.3f} ms per step "
-          f"({med / n * 1e6:.2f} us per vehicle and step; {args.reps} repetitions of {args.steps} steps; "
+          f"of {args.dt:g} s ({med / n * 1e6:.2f} us per vehicle and step; {args.reps} repetitions of {args.steps} steps; "
           f"min {min(per_step) / n * 1e6:.2f}, max {max(per_step) / n * 1e6:.2f} us)")
 
 
