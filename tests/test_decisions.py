@@ -7,6 +7,8 @@ of ``lanechange.py`` and ``junctions.py`` (docs/testing.md)."""
 from __future__ import annotations
 
 import math
+import subprocess
+from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
@@ -772,6 +774,70 @@ def test_a_leader_on_the_tracks_way_is_taken_when_sumo_has_the_vehicle_beside_it
     # On a normal lane too.
     v.cars["me"]["lane"] = "in_1"
     assert j.leader_on_track("me", track, far) == far
+
+
+def _fanout_junctions(conn: FakeConn) -> Junctions:
+    """Lane "in_1" (20 m) fans out over ":j_0_1" (10 m, into "out_1") and
+    ":j_0_2" (10 m, into "out_2")."""
+    after = {":j_0_1": [(":j_0_1", 10.0), ("out_1", 100.0)], ":j_0_2": [(":j_0_2", 10.0), ("out_2", 100.0)]}
+    net = SimpleNamespace(fanouts=lambda: {"in_1": ((":j_0_1", ":j_0_2"), 20.0)}, lanes_after=lambda via: after.get(via, []))
+    return Junctions(conn, net, None, None, 4.0)  # type: ignore[arg-type]
+
+
+def test_a_leader_past_a_fan_out_on_the_tracks_way_is_taken() -> None:
+    # "me" is on "in_1" at 5 m; its track goes through ":j_0_1". SUMO's
+    # driver would take ":j_0_2", so getLeader finds nothing (or something
+    # far) while a vehicle stands on the track's junction lane at 10 m with
+    # its back at 10 - 5 = 5 m: the gap as getLeader gives it is
+    # (20 - 5) + 5 - minGap 2.5 = 17.5 m.
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="in_1", pos=5.0, speed=11.0)
+    v.add("ahead", lane=":j_0_1", pos=10.0, speed=0.0)
+    v.add("beside", lane=":j_0_2", pos=8.0, speed=0.0)
+    v.cars["ahead"]["length"] = 5.0
+    v.cars["me"]["min_gap"] = 2.5
+    conn.lanes = {":j_0_1": ["ahead"], ":j_0_2": ["beside"]}
+    j = _fanout_junctions(conn)
+    track = ["in_1", "in_1", ":j_0_1", "out_1"]
+    assert j.leader_at_fanout("me", "in_1", track, None) == ("ahead", pytest.approx(17.5))
+    assert j.leader_at_fanout("me", "in_1", track, ("far", 40.0)) == ("ahead", pytest.approx(17.5))
+    # A nearer leader from SUMO stays, and so does one before the lane's end.
+    assert j.leader_at_fanout("me", "in_1", track, ("close", 12.0)) == ("close", 12.0)
+    # The track's way decides: through ":j_0_2" the vehicle there is the one ahead.
+    assert j.leader_at_fanout("me", "in_1", ["in_1", ":j_0_2", "out_2"], None) == ("beside", pytest.approx(15.0 + 8.0 - 5.0 - 2.5))
+    # A vehicle on the way beside the track's is not taken (SUMO's getLeader looks there).
+    conn.lanes = {":j_0_2": ["beside"]}
+    assert j.leader_at_fanout("me", "in_1", track, None) is None
+    # On the lane after the junction.
+    v.add("later", lane="out_1", pos=30.0, speed=3.0)
+    v.cars["later"]["length"] = 5.0
+    conn.lanes["out_1"] = ["later"]
+    assert j.leader_at_fanout("me", "in_1", track, None) == ("later", pytest.approx(15.0 + 10.0 + 25.0 - 2.5))
+    # A track that leaves the lane another way (or does not know the lane) keeps SUMO's answer.
+    assert j.leader_at_fanout("me", "in_1", ["in_1", ":k_0_0", "x"], None) is None
+    assert j.leader_at_fanout("me", "in_1", ["elsewhere"], ("far", 40.0)) == ("far", 40.0)
+
+
+def test_the_network_lists_the_lanes_that_fan_out(tmp_path: Path) -> None:
+    """A one-lane edge into a two-lane one: netconvert connects the lane to
+    both, so it fans out; the two-lane edge into a one-lane one does not
+    (two lanes onto one), nor does a lane with one connection."""
+    from blendtrack.sumo.connection import sumo_binary
+    from blendtrack.sumo.network import Network
+
+    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="100" y="0"/>'
+                                        '<node id="c" x="200" y="0"/><node id="d" x="300" y="0"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text('<edges><edge id="one" from="a" to="b" numLanes="1"/><edge id="two" from="b" to="c" numLanes="2"/>'
+                                        '<edge id="last" from="c" to="d" numLanes="1"/></edges>')
+    netconvert = Path(sumo_binary()).with_name("netconvert")
+    subprocess.run([str(netconvert), "-n", str(tmp_path / "n.nod.xml"), "-e", str(tmp_path / "n.edg.xml"),
+                    "-o", str(tmp_path / "n.net.xml"), "--no-turnarounds", "true"], check=True, capture_output=True)
+    fan = Network(tmp_path / "n.net.xml").fanouts()
+    assert set(fan) == {"one_0"}
+    vias, length = fan["one_0"]
+    assert len(vias) == 2 and all(v.startswith(":b_") for v in vias)
+    assert length == pytest.approx(Network(tmp_path / "n.net.xml").net().getLane("one_0").getLength())
 
 
 def test_a_leader_counts_when_the_vehicle_is_on_an_edge_without_the_target_lane() -> None:

@@ -44,6 +44,7 @@ class Network:
         #: ``Node.getLinkIndex``, which walks the node's connections anew on
         #: every call).
         self._link_indices: dict[str, dict[Any, int]] = {}
+        self._fanouts: dict[str, tuple[tuple[str, ...], float]] | None = None
 
     def net(self) -> Any:
         """The sumolib network."""
@@ -74,6 +75,28 @@ class Network:
             c = self.connection_of(via)
             hit = self._from_lanes[via] = None if c is None else str(c.getFromLane().getID())
             return hit
+
+    def fanouts(self) -> dict[str, tuple[tuple[str, ...], float]]:
+        """Per normal lane that fans out, two or more of its connections
+        leading to one edge (one lane onto several lanes of the next edge):
+        (the first junction lanes of those connections, the lane's length).
+        Which of them SUMO's driver takes is its own choice of lane, so
+        ``getLeader`` may look along another than the track's."""
+        if self._fanouts is None:
+            self._fanouts = {}
+            for edge in self.net().getEdges():
+                if edge.getFunction() == "internal":
+                    continue
+                for ln in edge.getLanes():
+                    by_edge: dict[str, list[str]] = {}
+                    for c in ln.getOutgoing():
+                        via = c.getViaLaneID()
+                        if via:
+                            by_edge.setdefault(c.getTo().getID(), []).append(via)
+                    vias = tuple(v for group in by_edge.values() if len(group) > 1 for v in group)
+                    if vias:
+                        self._fanouts[ln.getID()] = (vias, float(ln.getLength()))
+        return self._fanouts
 
     def is_zipper(self, via: str) -> bool:
         """Is ``via`` a junction lane of a zipper link (state Z)?"""

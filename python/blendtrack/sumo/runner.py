@@ -441,12 +441,16 @@ class SumoRun:
         leaders = [get_leader(ids[i], LEADER_RANGE_M) for i in ask]
         order, junctions = self.vehicles.order, self.junctions
         get_lane = self.conn.get_lane_id
+        fanouts = self.network.fanouts() if ask else {}
         for k, i in enumerate(ask):
-            # Only a vehicle on a junction lane needs a second look.
+            # Only a vehicle on a junction lane, or on a lane that fans out,
+            # needs a second look.
             lane = get_lane(ids[i])
             if not lane.startswith(":"):
                 if not leaders[k] or not leaders[k][0]:
                     leaders[k] = None
+                if lane in fanouts:
+                    leaders[k] = junctions.leader_at_fanout(ids[i], lane, order[i].geo.piece_lane, leaders[k])
             elif not leaders[k] or not leaders[k][0]:
                 leaders[k] = junctions.leader_beyond(ids[i], order[i].geo.piece_lane, lane)
             else:
