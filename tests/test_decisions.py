@@ -776,6 +776,31 @@ def test_a_leader_on_the_tracks_way_is_taken_when_sumo_has_the_vehicle_beside_it
     assert j.leader_on_track("me", track, far) == far
 
 
+def test_beside_its_tracks_lane_the_vehicle_is_measured_where_blendtrack_put_it() -> None:
+    # As above, but RouteFleet has the front at 9.5 m on the track's lane
+    # ":j_0_1" (SUMO's 8 m is a position on ":j_0_0", which parts from it):
+    # the gap is (20 - 9.5) + 1.5 - 2.5 = 9.5 m. A front RouteFleet has on
+    # another lane leaves SUMO's position.
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane=":j_0_0", pos=8.0, speed=2.0)
+    v.add("ahead", lane="out_1", pos=6.0, speed=0.0)
+    v.cars["ahead"]["length"] = 4.5
+    conn.lanes = {"out_1": ["ahead"]}
+    conn.get_lane_id = lambda vid: v.cars[vid]["lane"]  # type: ignore[attr-defined]
+    after = {":j_0_1": [(":j_0_1", 20.0), ("out_1", 100.0)]}
+    front = {"lane": 1, "pos": 9.5}
+    fleet = SimpleNamespace(front_lane_position=lambda slot: (front["lane"], front["pos"]))
+    tracks = SimpleNamespace(lanes=SimpleNamespace(names=["in_1", ":j_0_1", "out_1"]))
+    j = Junctions(conn, SimpleNamespace(lanes_after=lambda via: after.get(via, [])), tracks, fleet, 4.0,  # type: ignore[arg-type]
+                  controlled={"me": SimpleNamespace(slot=0)})
+    track = ["in_1", ":j_0_1", "out_1"]
+    assert j.leader_beyond("me", track) == ("ahead", pytest.approx(9.5))
+    assert j.leader_on_track("me", track, ("elsewhere", 25.9)) == ("ahead", pytest.approx(9.5))
+    front["lane"] = 0
+    assert j.leader_beyond("me", track) == ("ahead", pytest.approx(11.0))
+
+
 def _fanout_junctions(conn: FakeConn) -> Junctions:
     """Lane "in_1" (20 m) fans out over ":j_0_1" (10 m, into "out_1") and
     ":j_0_2" (10 m, into "out_2")."""

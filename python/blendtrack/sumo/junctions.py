@@ -213,7 +213,15 @@ class Junctions:
         pos = float(self.conn.get_lane_pos(vid))
         if beside:
             edge = lane.rsplit("_", 1)[0]
-            lane = next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
+            own = next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
+            if own != lane:
+                # SUMO's position on the lane beside is not one on the
+                # track's: lanes of a fan-out start together and part (traced
+                # on Bologna: 1.35 m taken for a gap of 0.1 m, the vehicle
+                # then stood 9 cm into its leader's minGap). Where it put the
+                # front on the track's lane is blendtrack's own.
+                pos = self._front_on(vid, own, pos)
+                lane = own
         ahead = self.network.lanes_after(lane)
         if not ahead:
             return None
@@ -263,6 +271,15 @@ class Junctions:
                 return (other, gap) if lead is None or gap < float(lead[1]) else lead
             dist += part
         return lead
+
+    def _front_on(self, vid: str, lane: str, fallback: float) -> float:
+        """The lane position blendtrack has ``vid``'s front at on ``lane``
+        (a lane of its track), or ``fallback`` when the front is not on it."""
+        act = self.controlled.get(vid)
+        if act is None or self.fleet is None:
+            return fallback
+        lane_id, pos = self.fleet.front_lane_position(act.slot)
+        return float(pos) if self.tracks.lanes.names[lane_id] == lane else fallback
 
     def leader_on_track(self, vid: str, track_lanes: list[str], lead: Any, lane: str | None = None) -> Any:
         """``lead`` (``getLeader``'s answer for ``vid``, found) or, when SUMO
