@@ -744,6 +744,40 @@ def test_a_barely_started_lane_change_is_given_up_when_its_room_goes(monkeypatch
         assert aborted == (["me"] if gives_up else []), (gap, lat, index)
 
 
+def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(monkeypatch: pytest.MonkeyPatch) -> None:
+    """A change the route needs, 0.8 m across (past giving up by its
+    offset), SUMO still having the vehicle on the lane it leaves: a vehicle
+    that has come alongside on the target lane (a follower or a leader whose
+    gap is below minus the minGap, 2.5 m: the bodies overlap) sends it back;
+    one clear ahead or behind, or only within the minGap, does not, nor
+    does one alongside once SUMO has the vehicle on another lane."""
+    from blendtrack.sumo.tracks import Active
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", speed=20.0, lat=0.8, lane="e_0", lane_index=0)
+    v.add("x")
+    v.add("y")
+    lcs = lane_changes(conn)
+    aborted: list[str] = []
+    monkeypatch.setattr(lcs, "abort_change", lambda act: aborted.append(act.vid))
+    monkeypatch.setattr(lcs, "left_behind", lambda act, lead: False)
+    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0)  # type: ignore[arg-type]
+    # Changing left (side 0): followers mode 0, leaders mode 2.
+    for followers, leaders, index, goes_back in [
+        ([("x", -3.3)], [], 0, True),
+        ([], [("x", -2.6)], 0, True),
+        ([("x", 4.0)], [("y", 6.0)], 0, False),
+        ([("x", -2.4)], [("y", -1.0)], 0, False),
+        ([("x", -3.3)], [], 2, False),
+    ]:
+        aborted.clear()
+        v.cars["me"]["lane_index"] = index
+        v.neighbours = {("me", 0): followers, ("me", 2): leaders}
+        lcs.changing_leader(act, None)
+        assert aborted == (["me"] if goes_back else []), (followers, leaders, index)
+
+
 def test_a_leader_on_the_tracks_way_is_taken_when_sumo_has_the_vehicle_beside_it() -> None:
     # Junction edge ":j_0" has lanes ":j_0_0" and ":j_0_1"; the track drives
     # ":j_0_1" (20 m) into "out_1". SUMO has the vehicle on ":j_0_0" at 8 m

@@ -204,15 +204,35 @@ class LaneChanges:
             if not self.room_for_change(act.vid, direction, speed, length):
                 self.abort_change(act)
                 return lead
+        side = 1 if direction < 0 else 0
+        if v.getLaneIndex(act.vid) == act.change_from and self.alongside_on_target(act.vid, side):
+            # Past giving up by its offset, but SUMO still has it on the lane
+            # it leaves, and a vehicle has come alongside on the target lane
+            # (a SUMO driver moving in from the far side sees the changer
+            # only once SUMO puts it there): carried over, it lands on that
+            # vehicle (traced on highway_onramp: 3.3 m into a driver at
+            # 27.6 m/s). It goes back, the change pending again.
+            self.abort_change(act)
+            return lead
         if self.left_behind(act, lead):
             lead = None
         # getNeighbors mode: bit 0 right (1) / left (0), bit 1 leaders (2).
-        for nid, gap in v.getNeighbors(act.vid, 2 | (1 if direction < 0 else 0)):
+        for nid, gap in v.getNeighbors(act.vid, 2 | side):
             # A neighbour alongside (gap < 0) is no obstacle ahead: braking
             # would leave the vehicle standing across both lanes.
             if gap >= 0.0:
                 lead = self.tighter_leader(lead, (nid, gap))
         return lead
+
+    def alongside_on_target(self, vid: str, side: int) -> bool:
+        """Is a vehicle alongside ``vid`` on the lane beside it (``side``: 1
+        right, 0 left), its body overlapping ``vid``'s along the road?
+        ``getNeighbors`` gives such a leader a gap below minus ``vid``'s
+        minGap, and such a follower one below minus its own."""
+        v = self.conn.sumo.vehicle
+        if any(gap < -float(v.getMinGap(vid)) for _, gap in v.getNeighbors(vid, 2 | side)):
+            return True
+        return any(gap < -float(v.getMinGap(other)) for other, gap in v.getNeighbors(vid, side))
 
     def abort_change(self, act: Active) -> None:
         """Back to the lane the vehicle is on, the change pending again (it is
