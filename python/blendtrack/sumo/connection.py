@@ -127,6 +127,9 @@ class SumoConnection:
         #: (several vehicles ask about the lanes of one junction): the
         #: cache's own ``__getitem__``, so a repeat costs a dict look-up.
         self.vehicles_on: Callable[[str], Any] = self._lane_ids.__getitem__
+        #: Speeds of SUMO's leaders read this step (``SumoLeaders.correct``),
+        #: which ``step_speed`` then does not read again.
+        self.leader_speeds: dict[str, float] = {}
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
 
     def _sumo_dir(self) -> Path:
@@ -282,7 +285,9 @@ class SumoConnection:
         ``t`` up to ``dt``). Only at steps of ``HOLD_BRAKING_MIN_STEP_S`` or
         more, as the traffic engine does for the leaders it drives (see
         ``braking_mean_speed`` there)."""
-        v = float(self.get_speed(vid))
+        v = self.leader_speeds.get(vid)
+        if v is None:
+            v = float(self.get_speed(vid))
         dt = self.dt
         if not dt >= HOLD_BRAKING_MIN_STEP_S:
             return v
@@ -349,6 +354,7 @@ class SumoConnection:
     def new_step(self) -> None:
         """A new control step: the per-step caches start empty."""
         self._lane_ids.clear()
+        self.leader_speeds.clear()
 
     def hand_back(self, vid: str) -> None:
         """SUMO's own driving for ``vid`` again (each call on its own: one

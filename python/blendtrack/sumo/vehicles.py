@@ -73,7 +73,8 @@ class SumoLeaders:
             decel = self._decel.get(lid)
             if decel is None:
                 decel = self._decel[lid] = max(float(self.conn.sumo.vehicle.getDecel(lid)), b)
-            v = max(float(self.conn.get_speed(lid)), 0.0)
+            v = self.conn.leader_speeds[lid] = float(self.conn.get_speed(lid))
+            v = max(v, 0.0)
             short = v * v / (2.0 * b) - euler_brake_gap(v, decel, dt)
             if short > 0.0:
                 leaders[k] = (lid, gap - short)
