@@ -182,7 +182,8 @@ class LaneChanges:
         closer of the two (or the one there is)."""
         v = self.conn.sumo.vehicle
         direction, target = act.changing  # type: ignore[misc]
-        if v.getLaneIndex(act.vid) == target:
+        index = v.getLaneIndex(act.vid)
+        if index == target:
             self.set_changing(act, None)
             return lead
         if act.tactical:
@@ -192,7 +193,7 @@ class LaneChanges:
             if not self.tactical_room(act.vid, direction, float(v.getSpeed(act.vid)), TACTICAL_KEEP_FACTOR):
                 self.abort_change(act)
                 return lead
-        elif abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M and v.getLaneIndex(act.vid) == act.change_from:
+        elif abs(v.getLateralLanePosition(act.vid)) < ABORT_CHANGE_LAT_M and index == act.change_from:
             # Barely started (or held at its start by a leader): the room
             # checked when it began may be gone, e.g. a follower has come up
             # on the target lane while the vehicle stood. Check again. Not
@@ -204,8 +205,10 @@ class LaneChanges:
             if not self.room_for_change(act.vid, direction, speed, length):
                 self.abort_change(act)
                 return lead
+        # getNeighbors mode: bit 0 right (1) / left (0), bit 1 leaders (2).
         side = 1 if direction < 0 else 0
-        if v.getLaneIndex(act.vid) == act.change_from and self.alongside_on_target(act.vid, side):
+        beside_leaders = v.getNeighbors(act.vid, 2 | side)
+        if index == act.change_from and self.alongside_on_target(act.vid, side, beside_leaders):
             # Past giving up by its offset, but SUMO still has it on the lane
             # it leaves, and a vehicle has come alongside on the target lane
             # (a SUMO driver moving in from the far side sees the changer
@@ -216,21 +219,21 @@ class LaneChanges:
             return lead
         if self.left_behind(act, lead):
             lead = None
-        # getNeighbors mode: bit 0 right (1) / left (0), bit 1 leaders (2).
-        for nid, gap in v.getNeighbors(act.vid, 2 | side):
+        for nid, gap in beside_leaders:
             # A neighbour alongside (gap < 0) is no obstacle ahead: braking
             # would leave the vehicle standing across both lanes.
             if gap >= 0.0:
                 lead = self.tighter_leader(lead, (nid, gap))
         return lead
 
-    def alongside_on_target(self, vid: str, side: int) -> bool:
+    def alongside_on_target(self, vid: str, side: int, leaders: list[tuple[str, float]]) -> bool:
         """Is a vehicle alongside ``vid`` on the lane beside it (``side``: 1
         right, 0 left), its body overlapping ``vid``'s along the road?
-        ``getNeighbors`` gives such a leader a gap below minus ``vid``'s
-        minGap, and such a follower one below minus its own."""
+        ``getNeighbors`` gives such a leader (``leaders``: its answer for
+        that lane's leaders) a gap below minus ``vid``'s minGap, and such a
+        follower one below minus its own."""
         v = self.conn.sumo.vehicle
-        if any(gap < -float(v.getMinGap(vid)) for _, gap in v.getNeighbors(vid, 2 | side)):
+        if any(gap < -float(v.getMinGap(vid)) for _, gap in leaders):
             return True
         return any(gap < -float(v.getMinGap(other)) for other, gap in v.getNeighbors(vid, side))
 
