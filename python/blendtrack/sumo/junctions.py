@@ -222,18 +222,27 @@ class Junctions:
                 # front on the track's lane is blendtrack's own.
                 pos = self._front_on(vid, own, pos)
                 lane = own
-        ahead = self.network.lanes_after(lane)
-        if not ahead:
-            return None
         veh = self.conn.sumo.vehicle
-        dist = -pos
-        for k, (nxt, length) in enumerate(ahead):
+
+        def on_first(on: list[str]) -> list[str]:
+            # On its own lane getLeader has looked; on the track's lane
+            # beside it, the vehicles ahead of it count.
+            return [x for x in on if float(veh.getLanePosition(x)) > pos] if beside else []
+
+        return self._first_on_way(vid, self.network.lanes_after(lane), -pos, on_first)
+
+    def _first_on_way(self, vid: str, way: list[tuple[str, float]], dist: float,
+                      on_first: Any = None) -> tuple[str, float] | None:
+        """The first vehicle but ``vid`` on ``way`` (lanes with their lengths,
+        in order; ``on_first`` filters the first lane's), with its gap as
+        ``getLeader`` gives it; ``dist``: from ``vid``'s front to the start
+        of the first lane."""
+        veh = self.conn.sumo.vehicle
+        for k, (nxt, length) in enumerate(way):
             # SUMO lists a lane's vehicles back to front.
             on = [x for x in self.conn.vehicles_on(nxt) if x != vid]
-            if k == 0:
-                # On its own lane getLeader has looked; on the track's lane
-                # beside it, the vehicles ahead of it count.
-                on = [x for x in on if float(veh.getLanePosition(x)) > pos] if beside else []
+            if k == 0 and on_first is not None:
+                on = on_first(on)
             if on:
                 other = on[0]
                 back = float(veh.getLanePosition(other)) - float(veh.getLength(other))
@@ -261,16 +270,8 @@ class Junctions:
         to_end = length - float(self.conn.get_lane_pos(vid))
         if lead is not None and float(lead[1]) <= to_end:
             return lead  # ahead on its own lane: nearer than anything beyond
-        veh = self.conn.sumo.vehicle
-        dist = to_end
-        for nxt, part in self.network.lanes_after(own):
-            on = [x for x in self.conn.vehicles_on(nxt) if x != vid]
-            if on:
-                other = on[0]
-                gap = dist + float(veh.getLanePosition(other)) - float(veh.getLength(other)) - float(veh.getMinGap(vid))
-                return (other, gap) if lead is None or gap < float(lead[1]) else lead
-            dist += part
-        return lead
+        found = self._first_on_way(vid, self.network.lanes_after(own), to_end)
+        return found if found is not None and (lead is None or found[1] < float(lead[1])) else lead
 
     def _front_on(self, vid: str, lane: str, fallback: float) -> float:
         """The lane position blendtrack has ``vid``'s front at on ``lane``
