@@ -14,7 +14,8 @@ Three cases, each at equal demand with and without the plugin:
 Each case runs plain SUMO through libsumo (nothing but ``simulationStep``
 in the loop; the same SUMO command line the plugin uses, seed 0), then the
 plugin with 0, 10, 100 and every vehicle controlled (the first ones to
-depart). Each run is a fresh process, right after a plain run of its own,
+depart), and with 10 % of them (``10%``: the plugin's own selection, a seeded
+hash of the vehicle ids, as ``--controlled-fraction 0.1`` picks them). Each run is a fresh process, right after a plain run of its own,
 over --reps repetitions: the machines this runs on are shared and their
 speed drifts by tens of per cent within minutes, so each ratio is of a run
 and the plain run just before it, and medians are printed.
@@ -64,6 +65,37 @@ CASES: dict[str, tuple[str, float, float]] = {
     "bologna": (str(ROOT.parent / "shared" / "scenarios_real" / "bologna_acosta"), 1.0, 300.0),
 }
 ALL = -1
+#: A row of the table: a number of vehicles (the first to depart), ALL, or a
+#: fraction (float) picked as ``--controlled-fraction`` does.
+Count = int | float
+
+
+def parse_counts(text: str) -> list[Count]:
+    """``--counts``: comma-separated numbers of vehicles, ``all``, or ``P%``."""
+    out: list[Count] = []
+    for tok in text.split(","):
+        tok = tok.strip()
+        try:
+            if tok == "all":
+                out.append(ALL)
+            elif tok.endswith("%"):
+                frac = float(tok[:-1]) / 100.0
+                if not 0.0 < frac <= 1.0:
+                    raise ValueError
+                out.append(frac)
+            else:
+                n = int(tok)
+                if n < 0:
+                    raise ValueError
+                out.append(n)
+        except ValueError:
+            raise SystemExit(f"bench_sumo: --counts: {tok!r} is not a number of vehicles, 'all' or a percentage "
+                             f"in (0, 100]%") from None
+    return out
+
+
+def label(n: Count) -> str:
+    return "all" if n == ALL else f"{100 * n:g}%" if isinstance(n, float) else str(n)
 
 GRID_CFG = """<configuration>
     <input><net-file value="grid7.net.xml"/><route-files value="grid7.rou.xml"/></input>
@@ -95,8 +127,12 @@ def build_grid() -> None:
     cfg.write_text(GRID_CFG)
 
 
-def _options(end: float, scale: float, n: int) -> RunOptions:
-    return RunOptions(controlled_fraction=1.0 if n != 0 else 0.0, max_controlled=None if n == ALL else n, end_s=end,
+def _options(end: float, scale: float, n: Count) -> RunOptions:
+    if isinstance(n, float):
+        fraction, most = n, None
+    else:
+        fraction, most = (1.0 if n != 0 else 0.0), (None if n == ALL else n)
+    return RunOptions(controlled_fraction=fraction, max_controlled=most, end_s=end,
                       sumo_args=("--scale", str(scale), "--no-warnings", "true"), progress=False)
 
 
@@ -124,7 +160,7 @@ def plain(scenario_name: str, end: float, scale: float) -> dict[str, Any]:
             "counts": counts}
 
 
-def _timed_run(scenario_name: str, end: float, scale: float, n: int) -> tuple[SumoRun, dict[str, Any]]:
+def _timed_run(scenario_name: str, end: float, scale: float, n: Count) -> tuple[SumoRun, dict[str, Any]]:
     run = SumoRun(resolve_scenario(scenario_name), _options(end, scale, n), None)
     acc = {"sumo_step": 0.0}
     counts: list[int] = []
@@ -148,7 +184,7 @@ def _timed_run(scenario_name: str, end: float, scale: float, n: int) -> tuple[Su
     return run, {"acc": acc, "counts": counts}
 
 
-def plugin(scenario_name: str, end: float, scale: float, n: int) -> dict[str, Any]:
+def plugin(scenario_name: str, end: float, scale: float, n: Count) -> dict[str, Any]:
     run, extra = _timed_run(scenario_name, end, scale, n)
     t0, c0 = time.perf_counter(), time.process_time()
     res = run.run()
@@ -170,7 +206,7 @@ def _category(func: tuple[str, int, str]) -> str:
     return "Python"
 
 
-def profiled(scenario_name: str, end: float, scale: float, n: int) -> dict[str, Any]:
+def profiled(scenario_name: str, end: float, scale: float, n: Count) -> dict[str, Any]:
     run, _ = _timed_run(scenario_name, end, scale, n)
     prof = cProfile.Profile()
     prof.enable()
@@ -193,11 +229,11 @@ def in_fresh_process(fn: Any, *args: Any) -> Any:
         return pool.submit(fn, *args).result()
 
 
-def bench_case(case: str, end: float, reps: int, counts: list[int], profile: bool) -> None:
+def bench_case(case: str, end: float, reps: int, counts: list[Count], profile: bool) -> None:
     scenario, scale, _ = CASES[case]
     plains: list[dict[str, Any]] = []
-    runs: dict[int, list[dict[str, Any]]] = {n: [] for n in counts}
-    ratios: dict[str, dict[int, list[float]]] = {k: {n: [] for n in counts} for k in ("wall", "cpu", "sumo_step")}
+    runs: dict[Count, list[dict[str, Any]]] = {n: [] for n in counts}
+    ratios: dict[str, dict[Count, list[float]]] = {k: {n: [] for n in counts} for k in ("wall", "cpu", "sumo_step")}
     for rep in range(reps):
         print(f"{case} rep {rep + 1}/{reps}:", end="", flush=True)
         for n in counts:
@@ -207,7 +243,7 @@ def bench_case(case: str, end: float, reps: int, counts: list[int], profile: boo
             runs[n].append(r)
             for k, rk in ratios.items():
                 rk[n].append(r[k] / p[k])
-            print(f" plain {p['wall']:.2f} s, {'all' if n == ALL else n}: {r['wall']:.2f} s;", end="", flush=True)
+            print(f" plain {p['wall']:.2f} s, {label(n)}: {r['wall']:.2f} s;", end="", flush=True)
         print()
 
     def med(rs: list[dict[str, Any]], key: str) -> float:
@@ -233,7 +269,7 @@ def bench_case(case: str, end: float, reps: int, counts: list[int], profile: boo
               f"{med(rs, 'sumo_step'):7.2f} {statistics.median(ratios['sumo_step'][n]):6.2f} {rest:7.2f} {per:11.2f} "
               f"{statistics.mean(c):6.0f}/{max(c):<6d}  (background {rs[0]['background_vehicles']}, collisions "
               f"{rs[0]['collisions']}, teleports {rs[0]['teleports']}, moves speed/lane/xy {rs[0]['moves_speed_only']}/"
-              f"{rs[0]['moves_lane_position']}/{rs[0]['moves_xy']})", flush=True)
+              f"{rs[0]['moves_lane_position']}/{rs[0]['moves_xy']}; row {label(n)})", flush=True)
     if profile:
         prof = in_fresh_process(profiled, scenario, end, scale, ALL)
         total = sum(t for t, _ in prof.values())
@@ -247,7 +283,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--cases", default="grid,highway,bologna", help=f"comma-separated, of {', '.join(CASES)}")
     ap.add_argument("--end", type=float, default=None, help="simulated seconds (default: each case's own, 300 s)")
-    ap.add_argument("--counts", default="0,10,100,all", help="controlled vehicles per run ('all': every vehicle)")
+    ap.add_argument("--counts", default="0,10,10%,100,all",
+                    help="controlled vehicles per run: a number (the first to depart), 'all', or 'P%%' (that "
+                         "share, picked as --controlled-fraction does)")
     ap.add_argument("--reps", type=int, default=3, help="interleaved repetitions (medians are printed)")
     ap.add_argument("--profile", action="store_true", help="also profile the every-vehicle run of each case")
     ap.add_argument("--quick", action="store_true", help="60 s, counts 0 and all, one repetition, with the profile")
@@ -259,7 +297,7 @@ def main() -> None:
         sys.exit(2)
     if args.quick:
         args.end, args.counts, args.reps, args.profile = 60.0, "0,all", 1, True
-    counts = [ALL if x == "all" else int(x) for x in args.counts.split(",")]
+    counts = parse_counts(args.counts)
     if "grid" in cases:
         build_grid()
     for case in cases:
