@@ -524,7 +524,7 @@ impl Path {
     /// of a projection near `s`): a few steps from the guess to the segment
     /// holding `s`, else (a guess out of range, too far off, or a non-finite
     /// `s`) the bucket look-up. The answer is `locate`'s whatever the guess.
-    #[inline]
+    #[inline(always)]
     fn locate_from(&self, s: f64, hint: usize) -> (usize, f64) {
         let n_seg = self.seg_len.len();
         if hint < n_seg {
@@ -547,11 +547,12 @@ impl Path {
         self.locate(s)
     }
 
-    #[inline]
+    #[inline(always)]
     fn seg_heading(&self, k: usize, offset: f64) -> f64 {
         let n = self.points.len();
         let a = self.vertex_heading[k];
-        let b = self.vertex_heading[(k + 1) % n];
+        // (k + 1) % n for the k < n just read, without an integer division.
+        let b = self.vertex_heading[if k + 1 == n { 0 } else { k + 1 }];
         let u = (offset / self.seg_len[k]).clamp(0.0, 1.0);
         wrap_angle(a + u * wrap_angle(b - a))
     }
@@ -636,11 +637,20 @@ impl Path {
     }
 
     /// Squared distance from `p` to segment `k`, and the offset of the foot along it.
-    #[inline]
+    #[inline(always)]
     fn seg_dist2(&self, k: usize, p: &Point2<f64>) -> (f64, f64) {
         let a = self.points[k];
         let d = p - a;
-        let t = d.dot(&self.seg_dir[k]).clamp(0.0, self.seg_len[k]);
+        // d . dir clamped to [0, len] (f64::clamp without its check of the
+        // bounds' order: a segment's length is > 0).
+        let (x, len) = (d.dot(&self.seg_dir[k]), self.seg_len[k]);
+        let t = if x < 0.0 {
+            0.0
+        } else if x > len {
+            len
+        } else {
+            x
+        };
         let foot = a + self.seg_dir[k] * t;
         ((p - foot).norm_squared(), t)
     }
@@ -847,8 +857,10 @@ impl Path {
     #[inline]
     fn next_seg(&self, k: usize) -> Option<usize> {
         let n = self.seg_len.len();
+        debug_assert!(k < n);
         if self.closed {
-            Some((k + 1) % n)
+            // (k + 1) % n for a segment k < n, without an integer division.
+            Some(if k + 1 >= n { 0 } else { k + 1 })
         } else if k + 1 < n {
             Some(k + 1)
         } else {
@@ -858,8 +870,10 @@ impl Path {
     #[inline]
     fn prev_seg(&self, k: usize) -> Option<usize> {
         let n = self.seg_len.len();
+        debug_assert!(k < n);
         if self.closed {
-            Some((k + n - 1) % n)
+            // (k + n - 1) % n for a segment k < n, without an integer division.
+            Some(if k == 0 { n - 1 } else { k - 1 })
         } else {
             k.checked_sub(1)
         }
