@@ -301,6 +301,8 @@ struct Ray<'a> {
     u: &'a Vector2<f64>,
     /// `(1 / u.x, 1 / u.y)`.
     inv_u: Vector2<f64>,
+    /// Per axis: `|u| < 1e-15` (the slab test of that axis is a range check).
+    flat: [bool; 2],
     /// `o` and `u` finite: no slab parameter is then NaN, and the box test
     /// takes its minima and maxima by plain comparisons.
     finite: bool,
@@ -312,6 +314,7 @@ impl<'a> Ray<'a> {
             o,
             u,
             inv_u: Vector2::new(1.0 / u.x, 1.0 / u.y),
+            flat: [u.x.abs() < 1e-15, u.y.abs() < 1e-15],
             finite: o.x.is_finite() && o.y.is_finite() && u.x.is_finite() && u.y.is_finite(),
         }
     }
@@ -327,28 +330,32 @@ impl<'a> Ray<'a> {
             return ray_hits_box(self.o, self.u, &self.inv_u, lo, hi, t_max);
         }
         let (mut t0, mut t1) = (0.0f64, t_max);
-        for axis in 0..2 {
-            let o = self.o[axis];
-            if self.u[axis].abs() < 1e-15 {
-                if o < lo[axis] || o > hi[axis] {
-                    return false;
-                }
-                continue;
-            }
-            let inv = self.inv_u[axis];
-            let (t_lo, t_hi) = ((lo[axis] - o) * inv, (hi[axis] - o) * inv);
-            let (ta, tb) = if t_lo < t_hi { (t_lo, t_hi) } else { (t_hi, t_lo) };
-            if ta > t0 {
-                t0 = ta;
-            }
-            if tb < t1 {
-                t1 = tb;
-            }
-            if t0 > t1 {
-                return false;
-            }
+        self.slab::<0>(lo, hi, &mut t0, &mut t1) && self.slab::<1>(lo, hi, &mut t0, &mut t1)
+    }
+
+    /// One axis of [`Self::hits_box`]: narrows `[t0, t1]`, false once empty.
+    #[inline(always)]
+    fn slab<const AXIS: usize>(
+        &self,
+        lo: &Point2<f64>,
+        hi: &Point2<f64>,
+        t0: &mut f64,
+        t1: &mut f64,
+    ) -> bool {
+        let o = self.o[AXIS];
+        if self.flat[AXIS] {
+            return !(o < lo[AXIS] || o > hi[AXIS]);
         }
-        true
+        let inv = self.inv_u[AXIS];
+        let (t_lo, t_hi) = ((lo[AXIS] - o) * inv, (hi[AXIS] - o) * inv);
+        let (ta, tb) = if t_lo < t_hi { (t_lo, t_hi) } else { (t_hi, t_lo) };
+        if ta > *t0 {
+            *t0 = ta;
+        }
+        if tb < *t1 {
+            *t1 = tb;
+        }
+        !(*t0 > *t1)
     }
 }
 
@@ -607,14 +614,8 @@ impl Border {
     /// from `start_s` to its end exceeds `scan_m` or `2 best + slack_m`.
     /// The loop goes run by run so that a segment costs its test and one
     /// comparison.
-    fn first_exit(
-        &self,
-        u: &Vector2<f64>,
-        o: &Point2<f64>,
-        start_s: f64,
-        scan_m: f64,
-        slack_m: f64,
-    ) -> f64 {
+    fn first_exit(&self, ray: &Ray, start_s: f64, scan_m: f64, slack_m: f64) -> f64 {
+        let (u, o) = (ray.u, ray.o);
         let segs = &self.segs[..];
         let n_seg = segs.len();
         if n_seg == 0 {
@@ -622,7 +623,6 @@ impl Border {
         }
         // Segment holding start_s.
         let mut k = self.vertex_holding(start_s).min(n_seg - 1);
-        let ray = Ray::new(o, u);
         let mut scan = Scan {
             best: f64::INFINITY,
             stop: 0.0,
@@ -857,13 +857,11 @@ impl Corridor {
         };
         let scan = back + horizon_m;
         let slack = back + 2.0 * self.max_width_m + 5.0;
+        let ray = Ray::new(origin, u);
         let best = self
             .left_simple
-            .first_exit(u, origin, start_s, scan, slack)
-            .min(
-                self.right_simple
-                    .first_exit(u, origin, start_s, scan, slack),
-            );
+            .first_exit(&ray, start_s, scan, slack)
+            .min(self.right_simple.first_exit(&ray, start_s, scan, slack));
         if best.is_finite() {
             Some(best)
         } else {
