@@ -841,6 +841,7 @@ impl Corridor {
 
     /// [`Self::ray_cast`] along the unit vector `u` (`(cos, sin)` of the
     /// heading), for a caller that has it already.
+    #[inline]
     pub fn ray_cast_along(
         &self,
         path: &Path,
