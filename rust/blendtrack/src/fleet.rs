@@ -547,7 +547,13 @@ impl<'a> Columns<'a> {
                 &mut n.v_mps[..],
                 &mut n.delta_rad[..],
             ],
-            None => [&mut [][..], &mut [][..], &mut [][..], &mut [][..], &mut [][..]],
+            None => [
+                &mut [][..],
+                &mut [][..],
+                &mut [][..],
+                &mut [][..],
+                &mut [][..],
+            ],
         };
         Columns {
             ok: &mut out.ok,

@@ -348,7 +348,11 @@ impl<'a> Ray<'a> {
         }
         let inv = self.inv_u[AXIS];
         let (t_lo, t_hi) = ((lo[AXIS] - o) * inv, (hi[AXIS] - o) * inv);
-        let (ta, tb) = if t_lo < t_hi { (t_lo, t_hi) } else { (t_hi, t_lo) };
+        let (ta, tb) = if t_lo < t_hi {
+            (t_lo, t_hi)
+        } else {
+            (t_hi, t_lo)
+        };
         if ta > *t0 {
             *t0 = ta;
         }
@@ -541,7 +545,13 @@ impl Border {
     fn exit(&self, k: usize, u: &Vector2<f64>, o: &Point2<f64>) -> Option<f64> {
         let g = &self.segs[k];
         // -leaving_sign e_out is the segment's vector (the sign change is exact).
-        segment_exit(&g.a, &(g.e_out * -self.leaving_sign), u, o, self.leaving_sign)
+        segment_exit(
+            &g.a,
+            &(g.e_out * -self.leaving_sign),
+            u,
+            o,
+            self.leaving_sign,
+        )
     }
 
     /// `best.min(self.exit(k, u, o).unwrap_or(inf))`, bit for bit, cheaper.
