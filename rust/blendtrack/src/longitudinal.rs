@@ -1267,4 +1267,133 @@ mod tests {
         // Both outcomes occur often (the test would be empty otherwise).
         assert!(hits > 1000 && n > 100 * hits, "{hits} hits of {n}");
     }
+
+    /// [`Border::first_exit`] as a plain loop, one segment at a time: the
+    /// scan's definition, which the run-by-run scan must match bit for bit.
+    fn plain_first_exit(
+        b: &Border,
+        u: &Vector2<f64>,
+        o: &Point2<f64>,
+        start_s: f64,
+        scan_m: f64,
+        slack_m: f64,
+    ) -> f64 {
+        let n_seg = b.n_segments();
+        if n_seg == 0 {
+            return f64::INFINITY;
+        }
+        let mut k =
+            b.s.partition_point(|&v| v <= start_s)
+                .saturating_sub(1)
+                .min(n_seg - 1);
+        let mut best = f64::INFINITY;
+        let inv_u = Vector2::new(1.0 / u.x, 1.0 / u.y);
+        let mut visited = 0;
+        while visited < n_seg {
+            visited += 1;
+            if k % BOX_SEGMENTS == 0 && k + BOX_SEGMENTS <= n_seg {
+                let (lo, hi) = &b.boxes[k / BOX_SEGMENTS];
+                if !ray_hits_box(o, u, &inv_u, lo, hi, best.min(1e12)) {
+                    k += BOX_SEGMENTS - 1;
+                    visited += BOX_SEGMENTS - 1;
+                }
+            }
+            best = best.min(b.exit(k, u, o).unwrap_or(f64::INFINITY));
+            let mut scanned = b.segs[k].end_s - start_s;
+            if b.closed && scanned < 0.0 {
+                scanned += b.path_length;
+            }
+            if scanned > scan_m || scanned > 2.0 * best + slack_m {
+                break;
+            }
+            k += 1;
+            if k >= n_seg {
+                if !b.closed {
+                    break;
+                }
+                k = 0;
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn the_run_by_run_scan_is_the_plain_scan_bit_for_bit() {
+        // Rays from around the corridor (inside, outside, across) mostly
+        // along the path, some any way, some axis-parallel or not finite;
+        // bounds of every kind (NaN, out of range, wrapping round).
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let track = Path::test_track(1.0).unwrap();
+        let open: Vec<[f64; 2]> = track.points()[..200].iter().map(|p| [p.x, p.y]).collect();
+        let paths = [
+            track.clone(),
+            Path::circle(30.0, 1e-3).unwrap(),
+            Path::straight(500.0, 5.0).unwrap(),
+            Path::new(&open, None, false).unwrap(),
+        ];
+        let (mut n, mut hits) = (0, 0);
+        for path in &paths {
+            for width in [3.0, 12.0] {
+                let cfg = ControllerConfig {
+                    path_width_m: width,
+                    ..Default::default()
+                };
+                let cor = Corridor::new(path, &cfg);
+                for _ in 0..4000 {
+                    let s = (1.1 * rnd() - 0.05) * path.length();
+                    let (c, h) = (path.point_at(s), path.heading_at(s));
+                    let off = (rnd() - 0.5) * 3.0 * width;
+                    let mut o = Point2::new(c.x - off * h.sin() + rnd() - 0.5, c.y + off * h.cos());
+                    let hd = if rnd() < 0.7 {
+                        h + 0.4 * (rnd() - 0.5)
+                    } else {
+                        7.0 * rnd()
+                    };
+                    let u = match (40.0 * rnd()) as u32 {
+                        0 => Vector2::new(1.0, 0.0),
+                        1 => Vector2::new(0.0, -1.0),
+                        2 => Vector2::new(f64::NAN, 0.5),
+                        3 => Vector2::new(f64::INFINITY, 1e-16),
+                        _ => Vector2::new(hd.cos(), hd.sin()),
+                    };
+                    if rnd() < 0.02 {
+                        o.x = f64::NAN;
+                    }
+                    let start_s = match (30.0 * rnd()) as u32 {
+                        0 => f64::NAN,
+                        1 => -5.0,
+                        2 => path.length() + 3.0,
+                        _ if path.is_closed() => path.wrap_s(s - 8.0),
+                        _ => (s - 8.0).max(0.0),
+                    };
+                    let scan_m = match (30.0 * rnd()) as u32 {
+                        0 => f64::NAN,
+                        1 => f64::INFINITY,
+                        _ => 400.0 * rnd(),
+                    };
+                    let slack_m = if rnd() < 0.03 { f64::NAN } else { 40.0 * rnd() };
+                    let ray = Ray::new(&o, &u);
+                    for b in [&cor.left_simple, &cor.right_simple] {
+                        let want = plain_first_exit(b, &u, &o, start_s, scan_m, slack_m);
+                        let got = b.first_exit(&ray, start_s, scan_m, slack_m);
+                        assert_eq!(
+                            got.to_bits(),
+                            want.to_bits(),
+                            "o {o:?} u {u:?} start {start_s} scan {scan_m} slack {slack_m}"
+                        );
+                        n += 1;
+                        hits += want.is_finite() as usize;
+                    }
+                }
+            }
+        }
+        // Exits are found often (the test would be empty otherwise).
+        assert!(hits > n / 10, "{hits} exits of {n} scans");
+    }
 }
