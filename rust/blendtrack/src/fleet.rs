@@ -36,7 +36,6 @@ use crate::error::ConfigError;
 use crate::longitudinal::Obstacle;
 use crate::path::Path;
 use crate::vehicle::{Command, Vehicle, VehicleParams, VehicleState};
-use rayon::prelude::*;
 use std::sync::Arc;
 use thiserror::Error;
 
@@ -486,49 +485,177 @@ impl Fleet {
                     .expect("check() verified every slot once")
             })
             .collect();
-        let mut rows = vec![Row::default(); n];
+        // Each vehicle's outputs go straight into their columns: a parallel
+        // step splits the vehicles and every column at the same index, so
+        // each thread writes its own part (no row array to transpose after).
+        let mut out = FleetOutputs {
+            ok: vec![false; n],
+            steering_rad: vec![f64::NAN; n],
+            accel_mps2: vec![f64::NAN; n],
+            alpha: vec![f64::NAN; n],
+            lateral_error_m: vec![f64::NAN; n],
+            heading_error_rad: vec![f64::NAN; n],
+            s_m: vec![f64::NAN; n],
+            s_rear_m: vec![f64::NAN; n],
+            lateral_error_rear_m: vec![f64::NAN; n],
+            lateral_error_front_m: vec![f64::NAN; n],
+            curvature_per_m: vec![f64::NAN; n],
+            virtual_obstacle_m: vec![f64::NAN; n],
+            next: inp.dt_s.map(|_| NextStates {
+                x_m: vec![f64::NAN; n],
+                y_m: vec![f64::NAN; n],
+                theta_rad: vec![f64::NAN; n],
+                v_mps: vec![f64::NAN; n],
+                delta_rad: vec![f64::NAN; n],
+            }),
+        };
+        let cols = Columns::of(&mut out);
         if n < PARALLEL_MIN_VEHICLES || self.threads == 1 {
-            for (i, (e, row)) in entries.iter_mut().zip(rows.iter_mut()).enumerate() {
-                *row = step_one(e, inp, i);
-            }
+            step_range(&mut entries, 0, cols, inp, false);
         } else {
             // Each vehicle's row depends on its own entry and the shared
             // inputs only, so any split over threads gives the same rows.
-            let mut work = || {
-                entries
-                    .par_iter_mut()
-                    .zip(rows.par_iter_mut())
-                    .enumerate()
-                    .for_each(|(i, (e, row))| *row = step_one(e, inp, i));
-            };
+            let work = || step_range(&mut entries, 0, cols, inp, true);
             match &self.pool {
                 Some(pool) => pool.install(work),
                 None => work(),
             }
         }
-        let col = |f: fn(&Row) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
-        Ok(FleetOutputs {
-            ok: rows.iter().map(|r| r.ok).collect(),
-            steering_rad: col(|r| r.steering_rad),
-            accel_mps2: col(|r| r.accel_mps2),
-            alpha: col(|r| r.alpha),
-            lateral_error_m: col(|r| r.lateral_error_m),
-            heading_error_rad: col(|r| r.heading_error_rad),
-            s_m: col(|r| r.s_m),
-            s_rear_m: col(|r| r.s_rear_m),
-            lateral_error_rear_m: col(|r| r.lateral_error_rear_m),
-            lateral_error_front_m: col(|r| r.lateral_error_front_m),
-            curvature_per_m: col(|r| r.curvature_per_m),
-            virtual_obstacle_m: col(|r| r.virtual_obstacle_m),
-            next: inp.dt_s.map(|_| NextStates {
-                x_m: col(|r| r.next.x_m),
-                y_m: col(|r| r.next.y_m),
-                theta_rad: col(|r| r.next.theta_rad),
-                v_mps: col(|r| r.next.v_mps),
-                delta_rad: col(|r| r.next.delta_rad),
-            }),
-        })
+        Ok(out)
     }
+}
+
+/// Vehicles a parallel step leaves to one thread (at most): a few hundred
+/// microseconds of work, so a 10,000-vehicle step splits into a few dozen.
+const PARALLEL_GRAIN: usize = 256;
+
+/// The output columns of the vehicles of one part of a step (`next` empty
+/// without a time step).
+struct Columns<'a> {
+    ok: &'a mut [bool],
+    f: [&'a mut [f64]; 11],
+    next: [&'a mut [f64]; 5],
+}
+
+impl<'a> Columns<'a> {
+    fn of(out: &'a mut FleetOutputs) -> Self {
+        let next = match &mut out.next {
+            Some(n) => [
+                &mut n.x_m[..],
+                &mut n.y_m[..],
+                &mut n.theta_rad[..],
+                &mut n.v_mps[..],
+                &mut n.delta_rad[..],
+            ],
+            None => [
+                &mut [][..],
+                &mut [][..],
+                &mut [][..],
+                &mut [][..],
+                &mut [][..],
+            ],
+        };
+        Columns {
+            ok: &mut out.ok,
+            f: [
+                &mut out.steering_rad,
+                &mut out.accel_mps2,
+                &mut out.alpha,
+                &mut out.lateral_error_m,
+                &mut out.heading_error_rad,
+                &mut out.s_m,
+                &mut out.s_rear_m,
+                &mut out.lateral_error_rear_m,
+                &mut out.lateral_error_front_m,
+                &mut out.curvature_per_m,
+                &mut out.virtual_obstacle_m,
+            ],
+            next,
+        }
+    }
+
+    /// The first `mid` entries of every column, and the rest.
+    fn split_at(self, mid: usize) -> (Self, Self) {
+        let (ok_a, ok_b) = self.ok.split_at_mut(mid);
+        let split = |c: &'a mut [f64]| {
+            if c.is_empty() {
+                (&mut [][..], &mut [][..])
+            } else {
+                c.split_at_mut(mid)
+            }
+        };
+        let [f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10] = self.f.map(split);
+        let [n0, n1, n2, n3, n4] = self.next.map(split);
+        (
+            Columns {
+                ok: ok_a,
+                f: [
+                    f0.0, f1.0, f2.0, f3.0, f4.0, f5.0, f6.0, f7.0, f8.0, f9.0, f10.0,
+                ],
+                next: [n0.0, n1.0, n2.0, n3.0, n4.0],
+            },
+            Columns {
+                ok: ok_b,
+                f: [
+                    f0.1, f1.1, f2.1, f3.1, f4.1, f5.1, f6.1, f7.1, f8.1, f9.1, f10.1,
+                ],
+                next: [n0.1, n1.1, n2.1, n3.1, n4.1],
+            },
+        )
+    }
+
+    /// Entry `j` of every column from `row`.
+    #[inline]
+    fn write(&mut self, j: usize, row: &Row) {
+        self.ok[j] = row.ok;
+        let vals = [
+            row.steering_rad,
+            row.accel_mps2,
+            row.alpha,
+            row.lateral_error_m,
+            row.heading_error_rad,
+            row.s_m,
+            row.s_rear_m,
+            row.lateral_error_rear_m,
+            row.lateral_error_front_m,
+            row.curvature_per_m,
+            row.virtual_obstacle_m,
+        ];
+        for (c, v) in self.f.iter_mut().zip(vals) {
+            c[j] = v;
+        }
+        if !self.next[0].is_empty() {
+            let n = &row.next;
+            let vals = [n.x_m, n.y_m, n.theta_rad, n.v_mps, n.delta_rad];
+            for (c, v) in self.next.iter_mut().zip(vals) {
+                c[j] = v;
+            }
+        }
+    }
+}
+
+/// Steps `entries` (input rows `base..`) into `cols`, split in halves over
+/// rayon's threads down to [`PARALLEL_GRAIN`] vehicles when `parallel`.
+fn step_range(
+    entries: &mut [&mut Entry],
+    base: usize,
+    mut cols: Columns<'_>,
+    inp: &FleetInputs<'_>,
+    parallel: bool,
+) {
+    if !parallel || entries.len() <= PARALLEL_GRAIN {
+        for (j, e) in entries.iter_mut().enumerate() {
+            cols.write(j, &step_one(e, inp, base + j));
+        }
+        return;
+    }
+    let mid = entries.len() / 2;
+    let (ea, eb) = entries.split_at_mut(mid);
+    let (ca, cb) = cols.split_at(mid);
+    rayon::join(
+        || step_range(ea, base, ca, inp, true),
+        || step_range(eb, base + mid, cb, inp, true),
+    );
 }
 
 /// Below this many vehicles a step runs on the calling thread only.

@@ -173,6 +173,7 @@ impl Travel {
 }
 
 /// Stanley command at the front axle for either direction.
+#[inline]
 pub fn stanley_command(front: &Projection, m: &Travel, g: &LateralGains) -> f64 {
     let (_, e_theta) = m.heading_and_error(front);
     let k = match m.direction {
@@ -200,6 +201,7 @@ pub fn stanley_command(front: &Projection, m: &Travel, g: &LateralGains) -> f64 
 }
 
 /// Curvature-based command at the rear axle for either direction.
+#[inline]
 pub fn rear_command(path: &Path, rear: &Projection, m: &Travel, g: &LateralGains) -> f64 {
     let (th, e_theta) = m.heading_and_error(rear);
     let d = g.target_distance(m.speed_abs);

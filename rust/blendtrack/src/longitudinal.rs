@@ -268,15 +268,100 @@ struct Border {
     /// Bounding box of each run of `BOX_SEGMENTS` segments, so a ray cast can
     /// skip a run its ray misses with one slab test.
     boxes: Vec<(Point2<f64>, Point2<f64>)>,
-    /// Per segment: its vector (end minus start) and the path arc length at
-    /// its end (`path_length` for a closed border's closing segment), so the
-    /// scan needs no index wrap-around.
-    edges: Vec<Vector2<f64>>,
-    end_s: Vec<f64>,
+    /// Per segment, together so a scan reads one record per segment: its
+    /// start, its vector and the path arc length at its end.
+    segs: Vec<Seg>,
+    /// `bucket[b]`: the vertex [`Border::vertex_holding`] gives for arc
+    /// length `b / bucket_scale`, where a look-up starts its walk.
+    bucket: Vec<u32>,
+    bucket_scale: f64,
+}
+
+/// One border segment as the ray cast reads it.
+#[derive(Debug, Clone, Copy)]
+struct Seg {
+    /// Start vertex.
+    a: Point2<f64>,
+    /// End minus start, times `-leaving_sign`: the ray leaves the corridor
+    /// through the segment only if `cross(u, e_out) > 0`. A sign change is
+    /// exact, so every quantity of [`segment_exit`] is this one's up to an
+    /// exact sign change (see [`Border::exit_below`]).
+    e_out: Vector2<f64>,
+    /// Path arc length at its end (`path_length` for a closed border's
+    /// closing segment), so the scan needs no index wrap-around.
+    end_s: f64,
 }
 
 /// Segments per bounding box of a border.
 const BOX_SEGMENTS: usize = 8;
+
+/// A ray `o + t u` with what its box tests need, computed once per ray cast.
+struct Ray<'a> {
+    o: &'a Point2<f64>,
+    u: &'a Vector2<f64>,
+    /// `(1 / u.x, 1 / u.y)`.
+    inv_u: Vector2<f64>,
+    /// Per axis: `|u| < 1e-15` (the slab test of that axis is a range check).
+    flat: [bool; 2],
+    /// `o` and `u` finite: no slab parameter is then NaN, and the box test
+    /// takes its minima and maxima by plain comparisons.
+    finite: bool,
+}
+
+impl<'a> Ray<'a> {
+    fn new(o: &'a Point2<f64>, u: &'a Vector2<f64>) -> Self {
+        Ray {
+            o,
+            u,
+            inv_u: Vector2::new(1.0 / u.x, 1.0 / u.y),
+            flat: [u.x.abs() < 1e-15, u.y.abs() < 1e-15],
+            finite: o.x.is_finite() && o.y.is_finite() && u.x.is_finite() && u.y.is_finite(),
+        }
+    }
+
+    /// [`ray_hits_box`]. With `o` and `u` finite each slab parameter is a
+    /// finite coordinate difference times a finite non-zero `1 / u` (an axis
+    /// with `|u| < 1e-15` is tested apart), so never NaN: comparisons then
+    /// pick the same minima and maxima as `f64::min` / `max` (up to the sign
+    /// of a zero, which no comparison sees), and the answer is the same.
+    #[inline]
+    fn hits_box(&self, lo: &Point2<f64>, hi: &Point2<f64>, t_max: f64) -> bool {
+        if !self.finite {
+            return ray_hits_box(self.o, self.u, &self.inv_u, lo, hi, t_max);
+        }
+        let (mut t0, mut t1) = (0.0f64, t_max);
+        self.slab::<0>(lo, hi, &mut t0, &mut t1) && self.slab::<1>(lo, hi, &mut t0, &mut t1)
+    }
+
+    /// One axis of [`Self::hits_box`]: narrows `[t0, t1]`, false once empty.
+    #[inline(always)]
+    fn slab<const AXIS: usize>(
+        &self,
+        lo: &Point2<f64>,
+        hi: &Point2<f64>,
+        t0: &mut f64,
+        t1: &mut f64,
+    ) -> bool {
+        let o = self.o[AXIS];
+        if self.flat[AXIS] {
+            return !(o < lo[AXIS] || o > hi[AXIS]);
+        }
+        let inv = self.inv_u[AXIS];
+        let (t_lo, t_hi) = ((lo[AXIS] - o) * inv, (hi[AXIS] - o) * inv);
+        let (ta, tb) = if t_lo < t_hi {
+            (t_lo, t_hi)
+        } else {
+            (t_hi, t_lo)
+        };
+        if ta > *t0 {
+            *t0 = ta;
+        }
+        if tb < *t1 {
+            *t1 = tb;
+        }
+        !(*t0 > *t1)
+    }
+}
 
 /// Does the ray `o + t u`, `0 <= t <= t_max`, touch the box `[lo, hi]`?
 /// `inv_u` is `(1 / u.x, 1 / u.y)`, computed once per ray cast.
@@ -386,19 +471,37 @@ impl Border {
             })
             .collect();
         let s: Vec<f64> = idx.iter().map(|&i| vertex_s[i]).collect();
-        let edges = (0..n_seg).map(|k| pts[(k + 1) % n] - pts[k]).collect();
-        let end_s = (0..n_seg)
-            .map(|k| if k + 1 < n { s[k + 1] } else { path_length })
+        let segs = (0..n_seg)
+            .map(|k| Seg {
+                a: pts[k],
+                e_out: (pts[(k + 1) % n] - pts[k]) * -leaving_sign,
+                end_s: if k + 1 < n { s[k + 1] } else { path_length },
+            })
+            .collect();
+        // About one bucket per vertex over the border's arc lengths.
+        let span = s.last().copied().unwrap_or(0.0).max(path_length);
+        let n_buckets = s.len().max(1);
+        let bucket_scale = if span > 0.0 {
+            n_buckets as f64 / span
+        } else {
+            0.0
+        };
+        let bucket = (0..n_buckets)
+            .map(|b| {
+                let at = b as f64 * span / n_buckets as f64;
+                s.partition_point(|&v| v <= at).saturating_sub(1) as u32
+            })
             .collect();
         Border {
             pts,
             s,
-            edges,
-            end_s,
+            segs,
             closed,
             path_length,
             leaving_sign,
             boxes,
+            bucket,
+            bucket_scale,
         }
     }
 
@@ -410,29 +513,97 @@ impl Border {
         }
     }
 
+    /// `s.partition_point(|&v| v <= at).saturating_sub(1)`: the last vertex
+    /// at or before arc length `at` (0 if none), by a short walk from the
+    /// bucket of `at` (a binary search if the walk is long).
+    #[inline]
+    fn vertex_holding(&self, at: f64) -> usize {
+        let s = &self.s[..];
+        // Also false for a NaN `at`, which no vertex is at or before.
+        if !s.first().is_some_and(|&s0| at >= s0) {
+            return 0;
+        }
+        let b = ((at * self.bucket_scale) as usize).min(self.bucket.len() - 1);
+        let mut k = self.bucket[b] as usize;
+        for _ in 0..8 {
+            if s[k] > at {
+                // s[0] <= at: k > 0 here.
+                k -= 1;
+            } else if k + 1 < s.len() && s[k + 1] <= at {
+                k += 1;
+            } else {
+                // s[k] <= at < s[k + 1] (or k is the last vertex): the last
+                // vertex at or before `at`, as the sorted s has one.
+                return k;
+            }
+        }
+        s.partition_point(|&v| v <= at).saturating_sub(1)
+    }
+
     /// Ray parameter at which the ray leaves the corridor through segment `k`.
     #[inline]
     fn exit(&self, k: usize, u: &Vector2<f64>, o: &Point2<f64>) -> Option<f64> {
-        segment_exit(&self.pts[k], &self.edges[k], u, o, self.leaving_sign)
+        let g = &self.segs[k];
+        // -leaving_sign e_out is the segment's vector (the sign change is exact).
+        segment_exit(
+            &g.a,
+            &(g.e_out * -self.leaving_sign),
+            u,
+            o,
+            self.leaving_sign,
+        )
     }
 
-    /// `best.min(self.exit(k, u, o).unwrap_or(inf))`, with the ray parameter
-    /// tested before the segment parameter is computed: a segment the ray
-    /// meets behind its origin or beyond `best` (most of them) costs one
-    /// division instead of two. The same value as `exit`, bit for bit.
-    #[inline]
+    /// `best.min(self.exit(k, u, o).unwrap_or(inf))`, bit for bit, cheaper.
+    ///
+    /// With `e` the segment's vector, [`segment_exit`] computes
+    /// `denom = cross(u, e)`, `t = cross(a - o, e) / denom` and
+    /// `lam = cross(a - o, u) / denom`. Here `e_out = -leaving_sign e`, so
+    /// `d = cross(u, e_out) = -leaving_sign denom` and
+    /// `cross(a - o, e_out) = -leaving_sign cross(a - o, e)` exactly (a
+    /// change of sign commutes with rounding), and `t` is
+    /// `cross(a - o, e_out) / d`, `lam` is `mm / d` with
+    /// `mm = -leaving_sign cross(a - o, u)`, the same doubles. Then:
+    /// - `segment_exit` goes on only if `|denom| >= 1e-15` and
+    ///   `-denom leaving_sign > 0`, that is `d >= 1e-15` (a NaN `d`, which
+    ///   this rejects at once, gives a NaN `t` there, rejected too);
+    /// - a segment parameter certainly outside [0, 1] (most segments the ray
+    ///   meets ahead) rejects the segment before any division: if
+    ///   `mm > fl(d (1 + 1e-6))` then `mm / d > 1 + 2^-52` exactly (the
+    ///   product rounds down by less than a part in 2^53), so the rounded
+    ///   quotient is at least the next double above 1; if
+    ///   `mm < -fl(d 1e-100)`, the quotient is below -1e-101, negative also
+    ///   after rounding (d >= 1e-15: no underflow). Either way `lam` fails;
+    /// - the ray parameter is tested before the segment parameter is
+    ///   divided out: a segment the ray meets behind its origin or beyond
+    ///   `best` costs one division instead of two.
+    ///
+    /// (The scan, [`Self::scan_run`], runs its two halves inline; the tests
+    /// hold this to `exit`.)
+    #[cfg(test)]
     fn exit_below(&self, k: usize, u: &Vector2<f64>, o: &Point2<f64>, best: f64) -> f64 {
-        let e = &self.edges[k];
-        let denom = cross(u, e);
-        if denom.abs() < 1e-15 || -denom * self.leaving_sign <= 0.0 {
+        let g = &self.segs[k];
+        let d = cross(u, &g.e_out);
+        if d >= 1e-15 {
+            self.exit_ahead(g, d, u, o, best)
+        } else {
+            best
+        }
+    }
+
+    /// The rest of [`Self::exit_below`] for a segment with `d >= 1e-15`.
+    #[inline]
+    fn exit_ahead(&self, g: &Seg, d: f64, u: &Vector2<f64>, o: &Point2<f64>, best: f64) -> f64 {
+        let ao = g.a - o;
+        let mm = cross(&ao, u) * -self.leaving_sign;
+        if mm > d * (1.0 + 1e-6) || mm < -(d * 1e-100) {
             return best;
         }
-        let ao = self.pts[k] - o;
-        let t = cross(&ao, e) / denom;
+        let t = cross(&ao, &g.e_out) / d;
         if !(t > BORDER_TOUCH_M && t < best) {
             return best;
         }
-        let lam = cross(&ao, u) / denom;
+        let lam = mm / d;
         if (0.0..=1.0).contains(&lam) {
             t
         } else {
@@ -443,47 +614,70 @@ impl Border {
     /// Smallest exit parameter over the segments from path arc length
     /// `start_s` on, scanning at most `scan_m` of path and stopping early
     /// (see [`Corridor::ray_cast`]).
-    fn first_exit(
-        &self,
-        u: &Vector2<f64>,
-        o: &Point2<f64>,
-        start_s: f64,
-        scan_m: f64,
-        slack_m: f64,
-    ) -> f64 {
-        let n_seg = self.n_segments();
+    ///
+    /// In effect, from the segment holding `start_s` on (wrapping round on a
+    /// closed border, at most every segment once): at the first segment of
+    /// each full run of `BOX_SEGMENTS`, if the ray misses the run's bounding
+    /// box (up to the best exit so far), only the run's last segment is
+    /// tested; each segment tested updates the best exit with
+    /// [`Self::exit_below`]; after each, the scan stops once the arc length
+    /// from `start_s` to its end exceeds `scan_m` or `2 best + slack_m`.
+    /// The loop goes run by run so that a segment costs its test and one
+    /// comparison.
+    fn first_exit(&self, ray: &Ray, start_s: f64, scan_m: f64, slack_m: f64) -> f64 {
+        let (u, o) = (ray.u, ray.o);
+        let segs = &self.segs[..];
+        let n_seg = segs.len();
         if n_seg == 0 {
             return f64::INFINITY;
         }
         // Segment holding start_s.
-        let mut k = self
-            .s
-            .partition_point(|&v| v <= start_s)
-            .saturating_sub(1)
-            .min(n_seg - 1);
-        let mut best = f64::INFINITY;
-        let inv_u = Vector2::new(1.0 / u.x, 1.0 / u.y);
+        let mut k = self.vertex_holding(start_s).min(n_seg - 1);
+        let mut scan = Scan {
+            best: f64::INFINITY,
+            stop: 0.0,
+            start_s,
+            scan_m,
+            slack_m,
+            path_length: self.path_length,
+        };
+        scan.update_stop();
         let mut visited = 0;
         while visited < n_seg {
-            visited += 1;
-            if k % BOX_SEGMENTS == 0 && k + BOX_SEGMENTS <= n_seg {
-                let (lo, hi) = &self.boxes[k / BOX_SEGMENTS];
-                if !ray_hits_box(o, u, &inv_u, lo, hi, best.min(1e12)) {
-                    // The ray cannot leave through this run: account for its length and move on.
-                    k += BOX_SEGMENTS - 1;
-                    visited += BOX_SEGMENTS - 1;
-                }
+            let (from, to);
+            if k % BOX_SEGMENTS == 0
+                && k + BOX_SEGMENTS <= n_seg
+                && !ray.hits_box(
+                    &self.boxes[k / BOX_SEGMENTS].0,
+                    &self.boxes[k / BOX_SEGMENTS].1,
+                    scan.best.min(1e12),
+                )
+            {
+                // The ray cannot leave through this run: account for its
+                // length, test its last segment.
+                from = k + BOX_SEGMENTS - 1;
+                to = k + BOX_SEGMENTS;
+                visited += BOX_SEGMENTS;
+            } else {
+                // On to the next run's start, at most every segment once.
+                from = k;
+                to = ((k / BOX_SEGMENTS + 1) * BOX_SEGMENTS)
+                    .min(n_seg)
+                    .min(k + (n_seg - visited));
+                visited += to - from;
             }
-            best = self.exit_below(k, u, o, best);
-            // Arc length (along the path) scanned once this segment is done.
-            let mut scanned = self.end_s[k] - start_s;
-            if self.closed && scanned < 0.0 {
-                scanned += self.path_length;
-            }
-            if scanned > scan_m || scanned > 2.0 * best + slack_m {
+            let run = &segs[from..to];
+            // Within a run the end arc lengths grow: if the first is not
+            // behind start_s, none is and no wrap-around correction applies.
+            let stopped = if self.closed && run[0].end_s - start_s < 0.0 {
+                self.scan_run::<true>(run, &mut scan, u, o)
+            } else {
+                self.scan_run::<false>(run, &mut scan, u, o)
+            };
+            if stopped {
                 break;
             }
-            k += 1;
+            k = to;
             if k >= n_seg {
                 if !self.closed {
                     break;
@@ -491,7 +685,61 @@ impl Border {
                 k = 0;
             }
         }
-        best
+        scan.best
+    }
+
+    /// Tests the segments of `run` in turn (see [`Self::first_exit`]);
+    /// true once the scan is to stop. `WRAP`: add the path length to an arc
+    /// length scanned that is negative (a closed border past its start).
+    #[inline(always)]
+    fn scan_run<const WRAP: bool>(
+        &self,
+        run: &[Seg],
+        scan: &mut Scan,
+        u: &Vector2<f64>,
+        o: &Point2<f64>,
+    ) -> bool {
+        for g in run {
+            let d = cross(u, &g.e_out);
+            if d >= 1e-15 {
+                let b = self.exit_ahead(g, d, u, o, scan.best);
+                if b < scan.best {
+                    scan.best = b;
+                    scan.update_stop();
+                }
+            }
+            // Arc length (along the path) scanned once this segment is done.
+            let mut scanned = g.end_s - scan.start_s;
+            if WRAP && scanned < 0.0 {
+                scanned += scan.path_length;
+            }
+            if scanned > scan.stop {
+                return true;
+            }
+        }
+        false
+    }
+}
+
+/// The state of one border's scan in [`Border::first_exit`].
+struct Scan {
+    best: f64,
+    /// The scan stops after a segment whose end is more than this arc
+    /// length past `start_s`: `scan_m.min(2 best + slack_m)`, which is
+    /// `scanned > scan_m || scanned > 2 best + slack_m` in one comparison
+    /// (also with a NaN: `f64::min` returns the other operand, and a
+    /// comparison with NaN is false).
+    stop: f64,
+    start_s: f64,
+    scan_m: f64,
+    slack_m: f64,
+    path_length: f64,
+}
+
+impl Scan {
+    #[inline]
+    fn update_stop(&mut self) {
+        self.stop = self.scan_m.min(2.0 * self.best + self.slack_m);
     }
 }
 
@@ -603,6 +851,7 @@ impl Corridor {
 
     /// [`Self::ray_cast`] along the unit vector `u` (`(cos, sin)` of the
     /// heading), for a caller that has it already.
+    #[inline]
     pub fn ray_cast_along(
         &self,
         path: &Path,
@@ -619,13 +868,11 @@ impl Corridor {
         };
         let scan = back + horizon_m;
         let slack = back + 2.0 * self.max_width_m + 5.0;
+        let ray = Ray::new(origin, u);
         let best = self
             .left_simple
-            .first_exit(u, origin, start_s, scan, slack)
-            .min(
-                self.right_simple
-                    .first_exit(u, origin, start_s, scan, slack),
-            );
+            .first_exit(&ray, start_s, scan, slack)
+            .min(self.right_simple.first_exit(&ray, start_s, scan, slack));
         if best.is_finite() {
             Some(best)
         } else {
@@ -1019,5 +1266,134 @@ mod tests {
         }
         // Both outcomes occur often (the test would be empty otherwise).
         assert!(hits > 1000 && n > 100 * hits, "{hits} hits of {n}");
+    }
+
+    /// [`Border::first_exit`] as a plain loop, one segment at a time: the
+    /// scan's definition, which the run-by-run scan must match bit for bit.
+    fn plain_first_exit(
+        b: &Border,
+        u: &Vector2<f64>,
+        o: &Point2<f64>,
+        start_s: f64,
+        scan_m: f64,
+        slack_m: f64,
+    ) -> f64 {
+        let n_seg = b.n_segments();
+        if n_seg == 0 {
+            return f64::INFINITY;
+        }
+        let mut k =
+            b.s.partition_point(|&v| v <= start_s)
+                .saturating_sub(1)
+                .min(n_seg - 1);
+        let mut best = f64::INFINITY;
+        let inv_u = Vector2::new(1.0 / u.x, 1.0 / u.y);
+        let mut visited = 0;
+        while visited < n_seg {
+            visited += 1;
+            if k % BOX_SEGMENTS == 0 && k + BOX_SEGMENTS <= n_seg {
+                let (lo, hi) = &b.boxes[k / BOX_SEGMENTS];
+                if !ray_hits_box(o, u, &inv_u, lo, hi, best.min(1e12)) {
+                    k += BOX_SEGMENTS - 1;
+                    visited += BOX_SEGMENTS - 1;
+                }
+            }
+            best = best.min(b.exit(k, u, o).unwrap_or(f64::INFINITY));
+            let mut scanned = b.segs[k].end_s - start_s;
+            if b.closed && scanned < 0.0 {
+                scanned += b.path_length;
+            }
+            if scanned > scan_m || scanned > 2.0 * best + slack_m {
+                break;
+            }
+            k += 1;
+            if k >= n_seg {
+                if !b.closed {
+                    break;
+                }
+                k = 0;
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn the_run_by_run_scan_is_the_plain_scan_bit_for_bit() {
+        // Rays from around the corridor (inside, outside, across) mostly
+        // along the path, some any way, some axis-parallel or not finite;
+        // bounds of every kind (NaN, out of range, wrapping round).
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rnd = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let track = Path::test_track(1.0).unwrap();
+        let open: Vec<[f64; 2]> = track.points()[..200].iter().map(|p| [p.x, p.y]).collect();
+        let paths = [
+            track.clone(),
+            Path::circle(30.0, 1e-3).unwrap(),
+            Path::straight(500.0, 5.0).unwrap(),
+            Path::new(&open, None, false).unwrap(),
+        ];
+        let (mut n, mut hits) = (0, 0);
+        for path in &paths {
+            for width in [3.0, 12.0] {
+                let cfg = ControllerConfig {
+                    path_width_m: width,
+                    ..Default::default()
+                };
+                let cor = Corridor::new(path, &cfg);
+                for _ in 0..4000 {
+                    let s = (1.1 * rnd() - 0.05) * path.length();
+                    let (c, h) = (path.point_at(s), path.heading_at(s));
+                    let off = (rnd() - 0.5) * 3.0 * width;
+                    let mut o = Point2::new(c.x - off * h.sin() + rnd() - 0.5, c.y + off * h.cos());
+                    let hd = if rnd() < 0.7 {
+                        h + 0.4 * (rnd() - 0.5)
+                    } else {
+                        7.0 * rnd()
+                    };
+                    let u = match (40.0 * rnd()) as u32 {
+                        0 => Vector2::new(1.0, 0.0),
+                        1 => Vector2::new(0.0, -1.0),
+                        2 => Vector2::new(f64::NAN, 0.5),
+                        3 => Vector2::new(f64::INFINITY, 1e-16),
+                        _ => Vector2::new(hd.cos(), hd.sin()),
+                    };
+                    if rnd() < 0.02 {
+                        o.x = f64::NAN;
+                    }
+                    let start_s = match (30.0 * rnd()) as u32 {
+                        0 => f64::NAN,
+                        1 => -5.0,
+                        2 => path.length() + 3.0,
+                        _ if path.is_closed() => path.wrap_s(s - 8.0),
+                        _ => (s - 8.0).max(0.0),
+                    };
+                    let scan_m = match (30.0 * rnd()) as u32 {
+                        0 => f64::NAN,
+                        1 => f64::INFINITY,
+                        _ => 400.0 * rnd(),
+                    };
+                    let slack_m = if rnd() < 0.03 { f64::NAN } else { 40.0 * rnd() };
+                    let ray = Ray::new(&o, &u);
+                    for b in [&cor.left_simple, &cor.right_simple] {
+                        let want = plain_first_exit(b, &u, &o, start_s, scan_m, slack_m);
+                        let got = b.first_exit(&ray, start_s, scan_m, slack_m);
+                        assert_eq!(
+                            got.to_bits(),
+                            want.to_bits(),
+                            "o {o:?} u {u:?} start {start_s} scan {scan_m} slack {slack_m}"
+                        );
+                        n += 1;
+                        hits += want.is_finite() as usize;
+                    }
+                }
+            }
+        }
+        // Exits are found often (the test would be empty otherwise).
+        assert!(hits > n / 10, "{hits} exits of {n} scans");
     }
 }

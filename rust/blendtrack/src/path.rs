@@ -95,7 +95,6 @@ pub struct Path {
     s: Vec<f64>,
     seg_dir: Vec<Vector2<f64>>,
     seg_len: Vec<f64>,
-    vertex_heading: Vec<f64>,
     widths: Option<Vec<Widths>>,
     closed: bool,
     length: f64,
@@ -108,6 +107,25 @@ pub struct Path {
     tangent_sampling_width_m: f64,
     window_back_m: f64,
     window_ahead_m: f64,
+    /// Per segment, what a projection reads of it in one record (copies of
+    /// the vectors above, so a projection touches one cache line).
+    segs: Vec<Seg>,
+}
+
+/// One segment of a [`Path`] as a projection reads it.
+#[derive(Debug, Clone, Copy)]
+struct Seg {
+    /// Start vertex (`points[k]`).
+    a: Point2<f64>,
+    /// Unit direction and length (`seg_dir[k]`, `seg_len[k]`).
+    dir: Vector2<f64>,
+    len: f64,
+    /// Arc length at the start (`s[k]`).
+    s0: f64,
+    /// Vertex headings (tangents, bisecting the adjacent segments) at the
+    /// start and the end of the segment.
+    h0: f64,
+    h1: f64,
 }
 
 impl Path {
@@ -172,14 +190,24 @@ impl Path {
         let vertex_heading = vertex_headings(&seg_dir, n, closed);
         let chunk_boxes = chunk_boxes(&pts, n_seg);
         let bucket = buckets(&s, length);
+        let segs = (0..n_seg)
+            .map(|k| Seg {
+                a: pts[k],
+                dir: seg_dir[k],
+                len: seg_len[k],
+                s0: s[k],
+                h0: vertex_heading[k],
+                h1: vertex_heading[(k + 1) % n],
+            })
+            .collect();
         Ok(Path {
+            segs,
             bucket,
             bucket_scale: n_seg as f64 / length,
             points: pts,
             s,
             seg_dir,
             seg_len,
-            vertex_heading,
             widths: widths.map(|_| ws),
             closed,
             length,
@@ -524,7 +552,7 @@ impl Path {
     /// of a projection near `s`): a few steps from the guess to the segment
     /// holding `s`, else (a guess out of range, too far off, or a non-finite
     /// `s`) the bucket look-up. The answer is `locate`'s whatever the guess.
-    #[inline]
+    #[inline(always)]
     fn locate_from(&self, s: f64, hint: usize) -> (usize, f64) {
         let n_seg = self.seg_len.len();
         if hint < n_seg {
@@ -547,12 +575,11 @@ impl Path {
         self.locate(s)
     }
 
-    #[inline]
+    #[inline(always)]
     fn seg_heading(&self, k: usize, offset: f64) -> f64 {
-        let n = self.points.len();
-        let a = self.vertex_heading[k];
-        let b = self.vertex_heading[(k + 1) % n];
-        let u = (offset / self.seg_len[k]).clamp(0.0, 1.0);
+        let g = &self.segs[k];
+        let (a, b) = (g.h0, g.h1);
+        let u = (offset / g.len).clamp(0.0, 1.0);
         wrap_angle(a + u * wrap_angle(b - a))
     }
 
@@ -575,6 +602,7 @@ impl Path {
 
     /// [`Self::heading_at`] with a guess of the segment holding `s` (any
     /// value is fine; one near `s` saves the look-up).
+    #[inline]
     pub fn heading_at_from(&self, s: f64, segment_hint: usize) -> f64 {
         let (k, off) = self.locate_from(s, segment_hint);
         self.seg_heading(k, off)
@@ -594,6 +622,7 @@ impl Path {
 
     /// [`Self::curvature_at`] with a guess of the segment holding `s` (as
     /// [`Self::heading_at_from`]).
+    #[inline]
     pub fn curvature_at_from(&self, s: f64, segment_hint: usize) -> f64 {
         self.curvature_over_from(s, self.tangent_sampling_width_m, segment_hint)
     }
@@ -603,6 +632,7 @@ impl Path {
         self.curvature_over_from(s, width_m, usize::MAX)
     }
 
+    #[inline]
     fn curvature_over_from(&self, s: f64, width_m: f64, segment_hint: usize) -> f64 {
         let w = width_m.min(self.length);
         if !(w > 0.0) {
@@ -636,12 +666,22 @@ impl Path {
     }
 
     /// Squared distance from `p` to segment `k`, and the offset of the foot along it.
-    #[inline]
+    #[inline(always)]
     fn seg_dist2(&self, k: usize, p: &Point2<f64>) -> (f64, f64) {
-        let a = self.points[k];
+        let g = &self.segs[k];
+        let a = g.a;
         let d = p - a;
-        let t = d.dot(&self.seg_dir[k]).clamp(0.0, self.seg_len[k]);
-        let foot = a + self.seg_dir[k] * t;
+        // d . dir clamped to [0, len] (f64::clamp without its check of the
+        // bounds' order: a segment's length is > 0).
+        let (x, len) = (d.dot(&g.dir), g.len);
+        let t = if x < 0.0 {
+            0.0
+        } else if x > len {
+            len
+        } else {
+            x
+        };
+        let foot = a + g.dir * t;
         ((p - foot).norm_squared(), t)
     }
 
@@ -652,13 +692,15 @@ impl Path {
     }
 
     /// A projection without the curvature (left at NaN), for callers that do not need it.
+    #[inline]
     fn make_projection_flat(&self, p: &Point2<f64>, k: usize, t: f64, dist2: f64) -> Projection {
-        let foot = self.points[k] + self.seg_dir[k] * t;
+        let g = &self.segs[k];
+        let foot = g.a + g.dir * t;
         let heading = self.seg_heading(k, t);
         let rel = p - foot;
         // Side from the segment direction in its interior, from the vertex tangent at its ends.
-        let side_dir = if t > 0.0 && t < self.seg_len[k] {
-            self.seg_dir[k]
+        let side_dir = if t > 0.0 && t < g.len {
+            g.dir
         } else {
             Vector2::new(heading.cos(), heading.sin())
         };
@@ -779,6 +821,7 @@ impl Path {
 
     /// [`Self::project_near`] with a guess of the segment holding `hint_s`
     /// (any value is fine; the last step's `segment` saves a look-up).
+    #[inline]
     pub fn project_near_from(
         &self,
         p: &Point2<f64>,
@@ -821,7 +864,7 @@ impl Path {
     /// segment's end is 0 on a closed path).
     #[inline]
     fn foot_s(&self, k: usize, t: f64) -> f64 {
-        let s = self.s[k] + t;
+        let s = self.segs[k].s0 + t;
         if self.closed && s >= self.length {
             s - self.length
         } else {
@@ -847,8 +890,10 @@ impl Path {
     #[inline]
     fn next_seg(&self, k: usize) -> Option<usize> {
         let n = self.seg_len.len();
+        debug_assert!(k < n);
         if self.closed {
-            Some((k + 1) % n)
+            // (k + 1) % n for a segment k < n, without an integer division.
+            Some(if k + 1 >= n { 0 } else { k + 1 })
         } else if k + 1 < n {
             Some(k + 1)
         } else {
@@ -858,8 +903,10 @@ impl Path {
     #[inline]
     fn prev_seg(&self, k: usize) -> Option<usize> {
         let n = self.seg_len.len();
+        debug_assert!(k < n);
         if self.closed {
-            Some((k + n - 1) % n)
+            // (k + n - 1) % n for a segment k < n, without an integer division.
+            Some(if k == 0 { n - 1 } else { k - 1 })
         } else {
             k.checked_sub(1)
         }
