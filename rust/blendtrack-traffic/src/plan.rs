@@ -47,6 +47,13 @@ pub(crate) struct Plan {
     pub(crate) slots: Vec<i64>,
     pub(crate) leader_gap: Vec<f64>,
     pub(crate) leader_speed: Vec<f64>,
+    /// The leader is driven by the simulator, not here: over a long step its
+    /// worst stop point is held (see [`crate::substep::leader_advance_speed`]).
+    pub(crate) leader_external: Vec<bool>,
+    /// The leader's entry in this plan when it is driven here and planned
+    /// too ([`NO_ENTRY`] otherwise): over a long step the follower sees it
+    /// move with its own control steps.
+    pub(crate) leader_entry: Vec<usize>,
     pub(crate) stop_gap: Vec<f64>,
     pub(crate) soft_gap: Vec<f64>,
     pub(crate) soft_speed: Vec<f64>,
@@ -72,6 +79,14 @@ pub fn can_stop(cfg: &ControllerConfig, v: f64, gap_m: f64) -> bool {
 }
 
 impl RouteFleet {
+    /// `slot` is a vehicle driven here.
+    fn drives(&self, slot: i64) -> bool {
+        usize::try_from(slot)
+            .ok()
+            .and_then(|l| self.driven.get(l))
+            .is_some_and(Option::is_some)
+    }
+
     /// A leader's speed: its state's where it is driven here (`slot` >= 0),
     /// else `given`.
     fn speed_of(&self, slot: i64, given: f64) -> f64 {
@@ -98,6 +113,8 @@ impl RouteFleet {
             slots: obs.slots.to_vec(),
             leader_gap: vec![f64::NAN; n],
             leader_speed: vec![f64::NAN; n],
+            leader_external: vec![false; n],
+            leader_entry: vec![NO_ENTRY; n],
             stop_gap: vec![f64::NAN; n],
             soft_gap: vec![f64::NAN; n],
             soft_speed: vec![f64::NAN; n],
@@ -109,6 +126,7 @@ impl RouteFleet {
             self.plan_leaders(obs, i, &mut plan);
             self.plan_vehicle(obs, i, &mut plan)?;
         }
+        plan.leader_entry = leader_entries(obs, self.driven.len());
         let queries = plan.queries.clone();
         self.plan = Some(plan);
         Ok(queries)
@@ -146,6 +164,7 @@ impl RouteFleet {
             // counts anything closer as a collision: stop further back.
             plan.leader_gap[i] = gap - margin;
             plan.leader_speed[i] = self.speed_of(obs.leader_slot[i], obs.leader_speed_mps[i]);
+            plan.leader_external[i] = !self.drives(obs.leader_slot[i]);
         }
         if let Some(sl) = &obs.soft {
             if sl.gap_m[i].is_finite() {
@@ -207,6 +226,32 @@ impl RouteFleet {
         }
         Ok(())
     }
+}
+
+/// No entry of the plan.
+pub(crate) const NO_ENTRY: usize = usize::MAX;
+
+/// Each entry's leader's entry in `obs` (the leader driven here, listed,
+/// and with a finite gap), else [`NO_ENTRY`]. `n_slots` bounds the slots.
+fn leader_entries(obs: &Observations<'_>, n_slots: usize) -> Vec<usize> {
+    let mut entry_of = vec![NO_ENTRY; n_slots];
+    for (i, &slot) in obs.slots.iter().enumerate() {
+        entry_of[slot as usize] = i;
+    }
+    (0..obs.slots.len())
+        .map(|i| {
+            let l = obs.leader_slot[i];
+            if l < 0 || l as usize >= n_slots || !obs.leader_gap_m[i].is_finite() {
+                return NO_ENTRY;
+            }
+            let j = entry_of[l as usize];
+            if j == i {
+                NO_ENTRY
+            } else {
+                j
+            }
+        })
+        .collect()
 }
 
 /// A leader slower than this (m/s; SUMO's halting speed) stands: it can

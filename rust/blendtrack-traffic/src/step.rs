@@ -195,7 +195,7 @@ impl RouteFleet {
         }
         let inputs = FleetInputs {
             leader_gap_m: Some(gaps.leader),
-            leader_speed_mps: Some(&plan.leader_speed),
+            leader_speed_mps: Some(gaps.leader_speed),
             stop_gap_m: Some(gaps.stop),
             soft_gap_m: Some(gaps.soft),
             soft_speed_mps: Some(&plan.soft_speed),

@@ -4,7 +4,7 @@
 //! each control step but the last taken into the statistics here; the last
 //! one goes on to the choice of the move ([`LastStep`]).
 
-use crate::plan::Plan;
+use crate::plan::{Plan, NO_ENTRY};
 use crate::stats::StepRecord;
 use crate::{RouteFleet, TrafficError};
 use blendtrack::{FleetOutputs, NextStates, VehicleState};
@@ -62,6 +62,29 @@ pub(crate) fn braking_mean_speed(v_mps: f64, accel_mps2: f64, dt_s: f64) -> f64 
     }
 }
 
+/// The speed at which a leader's gap grows over a step of `dt_s`, in the
+/// control steps after the first: its held speed (`v_mps`, see
+/// [`held_speed`]) for a leader driven here, whose control steps are known
+/// to move at that speed or its mean while braking. A leader the simulator
+/// drives is not held to anything inside the step: SUMO's driver picks its
+/// speed for the whole step at its start, and may brake at its decel (or
+/// harder) then, where the follower's control steps cannot see it until
+/// the next step. The stopping law depends on a leader only through its
+/// stop point (`gap + v_l^2 / (2 b_l)`); holding the gap still over the step
+/// (speed 0 here, the law's leader speed kept) holds that stop point where
+/// it was at the start of the step: the follower stays able to stop behind
+/// a leader that began braking then, as SUMO's own drivers do (their safe
+/// speed is chosen for the whole step from the leader's state at its start).
+/// Only for steps of [`HOLD_BRAKING_MIN_STEP_S`] or more: at 0.1 s the leader
+/// is seen again before it gets far.
+pub(crate) fn leader_advance_speed(v_mps: f64, external: bool, dt_s: f64) -> f64 {
+    if external && dt_s >= HOLD_BRAKING_MIN_STEP_S {
+        0.0
+    } else {
+        held_speed(v_mps)
+    }
+}
+
 /// How far a vehicle got from `from` to `to` (m): the rear axle's
 /// displacement. The bicycle model never drives against its direction of
 /// travel, so this is its advance along it (a chord of the arc it drove,
@@ -111,6 +134,8 @@ pub(crate) fn control_record(
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct HeldGaps<'a> {
     pub(crate) leader: &'a [f64],
+    /// The leaders' speeds as the stopping law takes them.
+    pub(crate) leader_speed: &'a [f64],
     pub(crate) stop: &'a [f64],
     pub(crate) soft: &'a [f64],
 }
@@ -120,6 +145,7 @@ impl<'a> HeldGaps<'a> {
     pub(crate) fn of_plan(plan: &'a Plan) -> Self {
         HeldGaps {
             leader: &plan.leader_gap,
+            leader_speed: &plan.leader_speed,
             stop: &plan.stop_gap,
             soft: &plan.soft_gap,
         }
@@ -171,20 +197,35 @@ impl RouteFleet {
         let mut states = self.planned_states(plan);
         let mut moved = vec![0.0; m];
         let mut leader = plan.leader_gap.clone();
+        let mut leader_speed = plan.leader_speed.clone();
+        let lock_step = dt_s >= HOLD_BRAKING_MIN_STEP_S;
         let mut stop = plan.stop_gap.clone();
         let mut soft = plan.soft_gap.clone();
         for k in 0..n {
             if k > 0 {
                 let t = k as f64 * h;
                 for i in 0..m {
-                    leader[i] =
-                        plan.leader_gap[i] + held_speed(plan.leader_speed[i]) * t - moved[i];
+                    let j = plan.leader_entry[i];
+                    if lock_step && j != NO_ENTRY {
+                        // A leader driven here: where its own control steps
+                        // took it, at the speed they left it.
+                        leader[i] = plan.leader_gap[i] + moved[j] - moved[i];
+                        leader_speed[i] = held_speed(states[j].v_mps);
+                    } else {
+                        let v_adv = leader_advance_speed(
+                            plan.leader_speed[i],
+                            plan.leader_external[i],
+                            dt_s,
+                        );
+                        leader[i] = plan.leader_gap[i] + v_adv * t - moved[i];
+                    }
                     soft[i] = plan.soft_gap[i] + held_speed(plan.soft_speed[i]) * t - moved[i];
                     stop[i] = plan.stop_gap[i] - moved[i];
                 }
             }
             let gaps = HeldGaps {
                 leader: &leader,
+                leader_speed: &leader_speed,
                 stop: &stop,
                 soft: &soft,
             };
@@ -261,6 +302,7 @@ mod tests {
     use super::{braking_mean_speed, substeps};
     use crate::testkit::*;
     use crate::*;
+    use blendtrack::ControllerConfig;
     use blendtrack::{Fleet, FleetInputs};
 
     const H: f64 = 0.05;
@@ -297,6 +339,18 @@ mod tests {
         gap: impl Fn(usize, f64) -> f64,
         v_leader: f64,
     ) -> VehicleState {
+        *reference_states(s0, n, |k, x| (gap(k, x), v_leader))
+            .last()
+            .unwrap()
+    }
+
+    /// As [`reference`], the leader's (gap, speed) at control step `k` from
+    /// `leader(k, x_k)`: every state from `s0` on (`n + 1` of them).
+    fn reference_states(
+        s0: VehicleState,
+        n: usize,
+        leader: impl Fn(usize, f64) -> (f64, f64),
+    ) -> Vec<VehicleState> {
         let mut fleet = Fleet::new();
         let cfg = ControllerConfig {
             preferred_speed: 15.0,
@@ -305,10 +359,12 @@ mod tests {
         let t = fleet.add_track(road(None, true).0, cfg).unwrap() as i64;
         let slot = [fleet.add_vehicle(t, None, None).unwrap() as i64];
         let mut s = s0;
+        let mut all = vec![s0];
         for k in 0..n {
+            let (gap, v_leader) = leader(k, s.x_m);
             let out = fleet
                 .step(&FleetInputs {
-                    leader_gap_m: Some(&[gap(k, s.x_m)]),
+                    leader_gap_m: Some(&[gap]),
                     leader_speed_mps: Some(&[v_leader]),
                     stop_gap_m: Some(&[f64::NAN]),
                     soft_gap_m: Some(&[f64::NAN]),
@@ -333,8 +389,9 @@ mod tests {
                 v_mps: next.v_mps[0],
                 delta_rad: next.delta_rad[0],
             };
+            all.push(s);
         }
-        s
+        all
     }
 
     #[test]
@@ -422,10 +479,30 @@ mod tests {
         }
     }
 
+    /// `step_behind` with the leader's slot given (>= 0: driven here).
+    fn step_behind_slot(
+        f: &mut RouteFleet,
+        slot: i64,
+        leader: (f64, f64, i64),
+        dt: f64,
+    ) -> RouteOutputs {
+        f.plan(&Observations {
+            slots: &[slot],
+            leader_gap_m: &[leader.0],
+            leader_slot: &[leader.2],
+            leader_speed_mps: &[leader.1],
+            lane: &[-1],
+            lane_pos_m: &[f64::NAN],
+            soft: None,
+        })
+        .unwrap();
+        f.step(&[], dt).unwrap()
+    }
+
     #[test]
     fn a_held_leader_drives_on_at_its_observed_speed() {
         // Far behind a slower leader, at its preferred speed: no braking, so
-        // over 1 s the gap shrinks by exactly (v - v_leader) dt.
+        // over the step the gap shrinks by exactly (v - v_leader) dt.
         let margin = TrafficSettings::default().standstill_margin_m;
         let (mut f, t) = fleet_with(road(None, true), settings(H));
         let a = f
@@ -439,13 +516,17 @@ mod tests {
             "{}",
             out.leader_gap_m[0]
         );
-        // Close behind it: it brakes, and each control step sees the gap the
-        // leader's held speed and the vehicle's own advance leave.
+        // Close behind a leader driven here: it brakes, and each control step
+        // sees the gap the leader's held speed and the vehicle's own advance
+        // leave.
         let s0 = at(50.0, 15.0);
         let g0 = 25.0;
         let (mut f, t) = fleet_with(road(None, true), settings(H));
         let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
-        let out = step_behind(&mut f, a, (g0, 10.0), 1.0);
+        let b = f
+            .add_vehicle(t, None, None, body(), at(80.0, 10.0), None)
+            .unwrap() as i64;
+        let out = step_behind_slot(&mut f, a, (g0, f64::NAN, b), 1.0);
         let held = |k: usize, x: f64| g0 - margin + 10.0 * k as f64 * H - (x - s0.x_m);
         let want = reference(s0, 20, held, 10.0);
         let got = f.state(a).unwrap();
@@ -462,6 +543,125 @@ mod tests {
         // A leader held in place (its gap at the start all step long) is another thing.
         let stale = reference(s0, 20, |_, _| g0 - margin, 10.0);
         assert!((stale.v_mps - got.v_mps).abs() > 1e-3);
+        // A leader the simulator drives, at a step shorter than
+        // HOLD_BRAKING_MIN_STEP_S, drives on as well (8 control steps of 0.4 s).
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
+        step_behind(&mut f, a, (g0, 10.0), 8.0 * H);
+        let want = reference(s0, 8, held, 10.0);
+        assert!((f.state(a).unwrap().v_mps - want.v_mps).abs() < 1e-9);
+    }
+
+    #[test]
+    fn over_a_long_step_a_leader_the_simulator_drives_keeps_its_stop_point() {
+        // At a 1 s step the simulator's driver may brake at the start of the
+        // step: the follower's control steps see the leader's gap where it
+        // was (the leader's stop point gap + v^2 / (2 b_l) held), not moved
+        // on at its speed.
+        let margin = TrafficSettings::default().standstill_margin_m;
+        let s0 = at(50.0, 15.0);
+        let g0 = 25.0;
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
+        let out = step_behind(&mut f, a, (g0, 10.0), 1.0);
+        let still = |_: usize, x: f64| g0 - margin - (x - s0.x_m);
+        let want = reference(s0, 20, still, 10.0);
+        let got = f.state(a).unwrap();
+        for (g, w) in [(got.x_m, want.x_m), (got.v_mps, want.v_mps)] {
+            assert!((g - w).abs() < 1e-9, "{g} vs {w}");
+        }
+        // Braking harder than behind a leader driving on.
+        let on = reference(
+            s0,
+            20,
+            |k, x| g0 - margin + 10.0 * k as f64 * H - (x - s0.x_m),
+            10.0,
+        );
+        assert!(got.v_mps < on.v_mps - 0.1, "{} vs {}", got.v_mps, on.v_mps);
+        // Closed form of the guarantee: were the leader to brake at b_l from
+        // the step's start, it stops at g0 - margin + v^2 / (2 |b_l|) ahead of
+        // where the follower was; the follower can still stop before it from
+        // its state at the end of the step, braking at b_l.
+        let b_l = -ControllerConfig::default().max_obs_deceleration;
+        let leader_stop = g0 - margin + 10.0 * 10.0 / (2.0 * b_l);
+        let moved = got.x_m - s0.x_m;
+        let own_stop = got.v_mps * got.v_mps / (2.0 * b_l);
+        assert!(
+            moved + own_stop <= leader_stop,
+            "{moved} + {own_stop} > {leader_stop}"
+        );
+        // The reported gap is still the leader's observed motion's.
+        assert!((out.leader_gap_m[0] - (g0 - margin + 10.0 - moved)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn over_a_long_step_a_leader_driven_here_moves_with_its_own_control_steps() {
+        // b, 15 m/s, 25 m behind a standing vehicle of the simulator's, brakes
+        // hard within the 1 s step; a follows b at 33 m, also at 15 m/s. Each
+        // of a's control steps sees b where b's control steps took it, at
+        // b's speed then (closed form: the core fleet stepped against b's
+        // own trajectory), not b held at 15 m/s.
+        let margin = TrafficSettings::default().standstill_margin_m;
+        let (sa, sb) = (at(60.0, 15.0), at(100.0, 15.0));
+        let (ga, gb) = (33.0, 25.0);
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f.add_vehicle(t, None, None, body(), sa, None).unwrap() as i64;
+        let b = f.add_vehicle(t, None, None, body(), sb, None).unwrap() as i64;
+        f.plan(&Observations {
+            slots: &[a, b],
+            leader_gap_m: &[ga, gb],
+            leader_slot: &[b, -1],
+            leader_speed_mps: &[f64::NAN, 0.0],
+            lane: &[-1, -1],
+            lane_pos_m: &[f64::NAN; 2],
+            soft: None,
+        })
+        .unwrap();
+        f.step(&[], 1.0).unwrap();
+        // b alone: its standing leader's gap shrinks by b's advance only.
+        let b_states = reference_states(sb, 20, |_, x| (gb - margin - (x - sb.x_m), 0.0));
+        let got_b = f.state(b).unwrap();
+        assert!((got_b.x_m - b_states[20].x_m).abs() < 1e-9);
+        assert!(got_b.v_mps < 11.0, "b braked hard: {}", got_b.v_mps);
+        let want = reference_states(sa, 20, |k, x| {
+            let lb = &b_states[k];
+            (ga - margin + (lb.x_m - sb.x_m) - (x - sa.x_m), lb.v_mps)
+        });
+        let got_a = f.state(a).unwrap();
+        for (g, w) in [(got_a.x_m, want[20].x_m), (got_a.v_mps, want[20].v_mps)] {
+            assert!((g - w).abs() < 1e-9, "{g} vs {w}");
+        }
+        // Held at its speed at the step's start, b would have left a unaware.
+        let held = reference(
+            sa,
+            20,
+            |k, x| ga - margin + 15.0 * k as f64 * H - (x - sa.x_m),
+            15.0,
+        );
+        assert_eq!(held.v_mps, 15.0, "held, b seemed no reason to brake");
+        assert!(got_a.v_mps < 14.8, "a braked with b: {}", got_a.v_mps);
+        // At a step below HOLD_BRAKING_MIN_STEP_S the leader is held as before.
+        let (mut f, t) = fleet_with(road(None, true), settings(H));
+        let a = f.add_vehicle(t, None, None, body(), sa, None).unwrap() as i64;
+        let b = f.add_vehicle(t, None, None, body(), sb, None).unwrap() as i64;
+        f.plan(&Observations {
+            slots: &[a, b],
+            leader_gap_m: &[ga, gb],
+            leader_slot: &[b, -1],
+            leader_speed_mps: &[f64::NAN, 0.0],
+            lane: &[-1, -1],
+            lane_pos_m: &[f64::NAN; 2],
+            soft: None,
+        })
+        .unwrap();
+        f.step(&[], 8.0 * H).unwrap();
+        let held = reference(
+            sa,
+            8,
+            |k, x| ga - margin + 15.0 * k as f64 * H - (x - sa.x_m),
+            15.0,
+        );
+        assert!((f.state(a).unwrap().x_m - held.x_m).abs() < 1e-9);
     }
 
     #[test]
