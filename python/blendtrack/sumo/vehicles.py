@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 
 from blendtrack import ControllerConfig, RouteFleet, VehicleParams
-from blendtrack.sumo.connection import SumoConnection
+from blendtrack.sumo.connection import HOLD_BRAKING_MIN_STEP_S, SumoConnection
 from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.records import RecordTotals, VehicleRecord
 from blendtrack.sumo.selection import PARAM_PREFIX, Selection
@@ -51,7 +51,8 @@ class SumoLeaders:
     Euler steps). Leaders blendtrack drives brake continuously and keep
     their gap. Taking the leader's decel as the follower's (4 m/s^2 instead
     of 4.5) left one collision on Bologna (a car cutting in 18.7 m ahead,
-    then braking at 4.5 m/s^2).
+    then braking at 4.5 m/s^2). At long steps the leader's stop point is
+    also bounded by its own leader's (``second_leader_stop``).
     """
 
     def __init__(self, conn: SumoConnection, active: dict[str, Active], obs_decel: float) -> None:
@@ -60,29 +61,77 @@ class SumoLeaders:
         #: The deceleration the stopping law assumes of a leader (m/s^2, > 0).
         self.obs_decel = obs_decel
         self._decel: dict[str, float] = {}
+        self._min_gap: dict[str, float] = {}
+
+    def _decel_of(self, vid: str) -> float:
+        decel = self._decel.get(vid)
+        if decel is None:
+            decel = self._decel[vid] = max(float(self.conn.sumo.vehicle.getDecel(vid)), self.obs_decel)
+        return decel
+
+    def _speed_of(self, vid: str) -> float:
+        v = self.conn.leader_speeds.get(vid)
+        if v is None:
+            v = self.conn.leader_speeds[vid] = float(self.conn.get_speed(vid))
+        return max(v, 0.0)
 
     def correct(self, leaders: list[Any]) -> list[Any]:
         """``leaders`` (``getLeader`` results: None or (id, gap)) with each gap
-        to a vehicle SUMO drives shortened; the list itself is updated."""
+        to a vehicle SUMO drives shortened; the list itself is updated.
+
+        At steps of ``HOLD_BRAKING_MIN_STEP_S`` or more the leader's stop
+        point is also bounded by its own leader's (``second_leader_stop``)."""
         dt = self.conn.dt
         b = self.obs_decel
+        second = dt >= HOLD_BRAKING_MIN_STEP_S
         for k, item in enumerate(leaders):
             if not item or not item[0] or item[0] in self.active:
                 continue
             lid, gap = item
-            decel = self._decel.get(lid)
-            if decel is None:
-                decel = self._decel[lid] = max(float(self.conn.sumo.vehicle.getDecel(lid)), b)
-            v = self.conn.leader_speeds[lid] = float(self.conn.get_speed(lid))
-            v = max(v, 0.0)
-            short = v * v / (2.0 * b) - euler_brake_gap(v, decel, dt)
+            decel = self._decel_of(lid)
+            v = self._speed_of(lid)
+            brake = euler_brake_gap(v, decel, dt)
+            short = v * v / (2.0 * b) - brake
+            if second and brake > 0.0:
+                bound = self.second_leader_stop(lid, gap, brake)
+                if bound < gap + brake:
+                    # Its stop point, max(gap, bound), as the law sees it.
+                    short = gap + v * v / (2.0 * b) - max(gap, bound)
             if short > 0.0:
                 leaders[k] = (lid, gap - short)
         return leaders
 
+    def second_leader_stop(self, lid: str, gap: float, brake: float) -> float:
+        """Where the back of ``lid`` (a leader SUMO drives, ``gap`` ahead)
+        stops at the latest, measured as ``gap`` is: no further than where
+        its own leader's back stops (that one braking at its decel with
+        Euler steps from its speed now), less ``lid``'s length, i.e.
+        ``gap + minGap(lid) + gap2 + euler_brake_gap(v2)`` with ``gap2`` what
+        ``getLeader(lid)`` gives. Only a leader within ``lid``'s own brake
+        gap (``brake``) can bound it; inf without one.
+
+        A driver of SUMO's brakes at up to its emergencyDecel (9 m/s^2 for a
+        passenger car) when a vehicle cuts in just ahead of it, and a 1 s
+        step's follower sees that only a step later, having planned with the
+        leader braking at its decel (traced at Eccles, seed 7 at 248 s: a
+        driver changed onto the lane 4.4 m ahead of a controlled vehicle at
+        11 m/s, a controlled vehicle changing in from the far side 3 m ahead
+        of its front; it braked from 11 to 2 m/s in the step and was run
+        into). Its own leader bounds where it can get whatever it does."""
+        found = self.conn.get_leader(lid, brake)
+        if not found or not found[0]:
+            return math.inf
+        lid2, gap2 = found
+        v2 = self._speed_of(lid2)
+        min_gap = self._min_gap.get(lid)
+        if min_gap is None:
+            min_gap = self._min_gap[lid] = float(self.conn.sumo.vehicle.getMinGap(lid))
+        return gap + min_gap + float(gap2) + euler_brake_gap(v2, self._decel_of(lid2), self.conn.dt)
+
     def forget(self, vid: str) -> None:
         """``vid`` left the simulation."""
         self._decel.pop(vid, None)
+        self._min_gap.pop(vid, None)
 
 
 class Controlled:
