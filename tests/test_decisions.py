@@ -921,3 +921,104 @@ def test_a_leader_counts_when_the_vehicle_is_on_an_edge_without_the_target_lane(
     lcs.network = SimpleNamespace(net=lambda: net)  # type: ignore[assignment]
     act = Active("me", 0, None, "", None, changing=(1, 3), change_span=(10.0, 20.0), change_from=1)  # type: ignore[arg-type]
     assert lcs.left_behind(act, ("lead", 30.0)) is False
+
+
+# ------------------------------------------------------- SUMO's leaders
+def _sumo_leaders(dt: float, second: tuple[str, float] | None) -> tuple[Any, FakeConn, list[float]]:
+    """SumoLeaders over a fake connection at step ``dt``: "l1" (SUMO's, at
+    11 m/s, decel 4.5, minGap 2.5) leads, its own leader is ``second`` (id,
+    getLeader gap) when within the distance asked; the distances asked are
+    listed."""
+    from blendtrack.sumo.vehicles import SumoLeaders
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("l1", speed=11.0)
+    v.add("l2", speed=7.3)
+    v.getDecel = lambda vid: 4.5  # type: ignore[attr-defined]
+    asked: list[float] = []
+
+    def get_leader(vid: str, dist: float) -> Any:
+        assert vid == "l1"
+        asked.append(dist)
+        return second if second is not None and second[1] <= dist else None
+
+    conn.get_leader = get_leader  # type: ignore[attr-defined]
+    conn.dt = dt  # type: ignore[attr-defined]
+    conn.leader_speeds = {}  # type: ignore[attr-defined]
+    return SumoLeaders(conn, {}, 4.0), conn, asked  # type: ignore[arg-type]
+
+
+def test_a_sumo_leaders_stop_point_is_bounded_by_its_own_leader_at_long_steps() -> None:
+    from blendtrack.sumo.vehicles import euler_brake_gap
+
+    b = 4.0
+    brake1 = euler_brake_gap(11.0, 4.5, 1.0)  # 11 + 6.5 = 17.5, less 4.5 each: 6.5 + 2 = 8.5
+    assert brake1 == pytest.approx(8.5)
+    stop_of = lambda gap: gap + 11.0**2 / (2 * b)  # noqa: E731 - the law's stop point of l1 at that gap
+
+    # Nobody ahead of l1 within its brake gap: the Euler correction alone,
+    # the stop point is gap + 8.5.
+    sl, _, asked = _sumo_leaders(1.0, None)
+    (lid, gap), = sl.correct([("l1", 4.4)])
+    assert lid == "l1" and stop_of(gap) == pytest.approx(4.4 + 8.5)
+    assert asked == [pytest.approx(8.5)]
+    # A vehicle cut in overlapping l1's front (getLeader gap -4.5) at 7.3 m/s:
+    # l1's back stops by 4.4 + 2.5 - 4.5 + (7.3 - 4.5) = 5.2 m at the latest.
+    sl, _, _ = _sumo_leaders(1.0, ("l2", -4.5))
+    (_, gap), = sl.correct([("l1", 4.4)])
+    assert stop_of(gap) == pytest.approx(4.4 + 2.5 - 4.5 + 2.8)
+    # A leader that cannot be passed through never moves l1 back.
+    sl, conn, _ = _sumo_leaders(1.0, ("l2", -9.0))
+    conn.vehicle.cars["l2"]["speed"] = 0.0
+    (_, gap), = sl.correct([("l1", 4.4)])
+    assert stop_of(gap) == pytest.approx(4.4)
+    # One further than l1 could get is no bound: the Euler correction stays.
+    sl, _, _ = _sumo_leaders(1.0, ("l2", 8.0))
+    (_, gap), = sl.correct([("l1", 4.4)])
+    assert stop_of(gap) == pytest.approx(4.4 + 8.5)
+    # At 0.1 s steps the follower sees l1 brake a tenth of a second later:
+    # nobody is asked, the Euler correction alone.
+    sl, _, asked = _sumo_leaders(0.1, ("l2", -4.5))
+    (_, gap), = sl.correct([("l1", 4.4)])
+    assert asked == [] and stop_of(gap) == pytest.approx(4.4 + euler_brake_gap(11.0, 4.5, 0.1))
+    # Leaders blendtrack drives keep their gap; no leader stays none.
+    sl, _, asked = _sumo_leaders(1.0, ("l2", -4.5))
+    sl.active = {"l1": None}  # type: ignore[dict-item]
+    assert sl.correct([("l1", 4.4), None, ("", -1.0)]) == [("l1", 4.4), None, ("", -1.0)]
+    assert asked == []
+
+
+def test_a_change_waits_for_a_driver_joining_the_target_lane_from_beyond() -> None:
+    # "me" (front 50 m, 5 m long) changes from e_0 to e_1 over 20 m; SUMO's
+    # driver "far" on e_2 at 60 m wants to change right onto e_1.
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="e_0", pos=50.0, speed=12.0)
+    v.add("far", lane="e_2", pos=60.0, speed=12.0)
+    conn.lanes = {"e_2": ["far"]}
+    wishes = {"far": tc.LCA_RIGHT}
+    conn.lane_change_state = lambda vid, d: (wishes[vid] if d < 0 else 0, 0)  # type: ignore[attr-defined]
+    lcs = lane_changes(conn, lanes={"e_1": FakeLane(200.0, n_lanes=3), "e_2": FakeLane(200.0, n_lanes=3)})
+    joining = lambda: lcs.joining_from_beyond("me", "e", 1, 1, 50.0, 20.0)  # noqa: E731
+    assert joining()
+    # Blocked, or wanting the other way, or no wish: no.
+    wishes["far"] = tc.LCA_RIGHT | tc.LCA_BLOCKED
+    assert not joining()
+    wishes["far"] = 0
+    assert not joining()
+    wishes["far"] = tc.LCA_RIGHT
+    # Out of reach: past the change's end plus JOIN_LOOK_M, or that far behind the back.
+    v.cars["far"]["pos"] = 50.0 + 20.0 + lc.JOIN_LOOK_M + 0.1
+    assert not joining()
+    v.cars["far"]["pos"] = 45.0 - lc.JOIN_LOOK_M - 0.1
+    assert not joining()
+    v.cars["far"]["pos"] = 45.0 - lc.JOIN_LOOK_M + 0.1
+    assert joining()
+    # No lane beyond the target (a change to the edge's last lane).
+    assert not lcs.joining_from_beyond("me", "e", 2, 1, 50.0, 20.0)
+    # A controlled vehicle there: its SUMO wish does not count, its change onto the target does.
+    lcs.active["far"] = SimpleNamespace(vid="far", changing=None)  # type: ignore[assignment]
+    assert not joining()
+    lcs.active["far"] = SimpleNamespace(vid="far", changing=(-1, 1))  # type: ignore[assignment]
+    assert joining()

@@ -23,6 +23,10 @@ LANE_CHANGE_ROOM_M = 15.0
 # A lane change starts only with this gap (m), plus what the closing speed
 # eats during the change, to the vehicles ahead and behind on the target lane.
 LANE_CHANGE_GAP_M = 5.0
+# How far (m) behind a changer's back and past the end of its change a
+# vehicle on the lane beyond the target lane is looked at for a change onto
+# the target lane (``LaneChanges.joining_from_beyond``).
+JOIN_LOOK_M = 30.0
 # A lane change takes LANE_CHANGE_S seconds of travel at the present speed
 # (at least LANE_CHANGE_MIN_M, at most LANE_CHANGE_MAX_M metres, and no more
 # than the lane has left): 1.6 m/s across on average, 4.8 m/s^2 of lateral
@@ -293,7 +297,10 @@ class LaneChanges:
         # not react to it before: start only with room for the whole change
         # (what the follower closes in while the vehicle covers the change's
         # length, pulling away from its present speed) plus a margin.
-        if not self.room_for_change(act.vid, direction, speed, length):
+        if (
+            not self.room_for_change(act.vid, direction, speed, length)
+            or self.joining_from_beyond(act.vid, edge, target, direction, pos, length)
+        ):
             self.wait_for_gap(act.vid, direction, target_lane, pos, speed)
             return
         geo2, track = self.tracks.geometry(geo.edges[k_edge:], current, change=(pos, length))
@@ -427,6 +434,44 @@ class LaneChanges:
         acceleration, at the mean speed that covers the length in that time."""
         duration = change_duration(speed, length, self.plan_accel)
         return self.target_lane_clear(vid, direction, length / duration, duration)
+
+    def joining_from_beyond(self, vid: str, edge: str, target: int, direction: int, front: float, length: float) -> bool:
+        """Is a vehicle on the lane beyond ``target`` (seen from the changer)
+        about to change onto it level with the change (from
+        ``JOIN_LOOK_M`` behind the changer's back to that far past the end
+        of the change, ``length`` m from ``front``)? One of SUMO's drivers
+        whose lane-change model wants and could make that change, or a
+        controlled vehicle changing there. Neither sees the changer before
+        SUMO puts it on the target lane, nor the changer it: traced at
+        Eccles (30 %, seed 11, 549 s), a controlled vehicle and one of SUMO's
+        drivers changed onto the weaving lane in the same step from either
+        side, 10 m apart, and the driver ran into it."""
+        far = target + direction
+        try:
+            lanes = int(self.network.net().getLane(f"{edge}_{target}").getEdge().getLaneNumber())
+        except Exception:
+            return False
+        if not 0 <= far < lanes:
+            return False
+        v = self.conn.sumo.vehicle
+        back = front - float(v.getLength(vid))
+        lo, hi = back - JOIN_LOOK_M, front + length + JOIN_LOOK_M
+        toward = -direction
+        import traci.constants as tc
+
+        wish = tc.LCA_LEFT if toward > 0 else tc.LCA_RIGHT
+        for other in self.conn.vehicles_on(f"{edge}_{far}"):
+            if not lo <= float(v.getLanePosition(other)) <= hi:
+                continue
+            act = self.active.get(other)
+            if act is not None:
+                if act.changing is not None and act.changing[1] == target:
+                    return True
+                continue
+            state, _ = self.conn.lane_change_state(other, toward)
+            if state & wish and not state & tc.LCA_BLOCKED:
+                return True
+        return False
 
     def tactical_room(self, vid: str, direction: int, speed: float, factor: float, near: Neighbours | None = None) -> bool:
         """Gaps on the target lane for a change that is only wanted (see

@@ -113,12 +113,10 @@ class Selection:
         if "max_obs_deceleration" not in self.opt.fixed_keys and "max_obs_deceleration" not in overrides:
             overrides["max_obs_deceleration"] = overrides.get("max_deceleration", self.base_config.max_deceleration)
         # preferred_acceleration keeps the paper's 1 m/s^2 unless set (a
-        # blendtrack.preferred_acceleration vType param, or --config). With the
-        # vType's accel (2.6 m/s^2 for SUMO's passenger car) queues left lights
-        # faster (Bologna, seed 0: 0.79 of plain SUMO's arrivals) but seed 1
-        # had 4 collisions with controlled vehicles where 1 m/s^2 had none;
-        # earlier the all-controlled grid had 3 junction collisions in 300 s
-        # with it.
+        # blendtrack.preferred_acceleration vType param, or --config). The
+        # vType's accel (2.6 m/s^2 for SUMO's passenger car) gains arrivals but
+        # brought collisions with controlled vehicles at Eccles (vehicles
+        # changing two lanes in one go into a dense stream): docs/sumo.md.
         try:
             cfg = self.base_config.replace(**overrides) if overrides else self.base_config
             veh = self.base_vehicle.replace(**vehicle_overrides) if vehicle_overrides else self.base_vehicle
