@@ -317,10 +317,20 @@ mod tests {
     /// One plan + step of `dt` for one vehicle behind a leader (gap, speed;
     /// NaN: none).
     fn step_behind(f: &mut RouteFleet, slot: i64, leader: (f64, f64), dt: f64) -> RouteOutputs {
+        step_behind_slot(f, slot, (leader.0, leader.1, -1), dt)
+    }
+
+    /// `step_behind` with the leader's slot given (>= 0: driven here).
+    fn step_behind_slot(
+        f: &mut RouteFleet,
+        slot: i64,
+        leader: (f64, f64, i64),
+        dt: f64,
+    ) -> RouteOutputs {
         f.plan(&Observations {
             slots: &[slot],
             leader_gap_m: &[leader.0],
-            leader_slot: &[-1],
+            leader_slot: &[leader.2],
             leader_speed_mps: &[leader.1],
             lane: &[-1],
             lane_pos_m: &[f64::NAN],
@@ -342,6 +352,18 @@ mod tests {
         *reference_states(s0, n, |k, x| (gap(k, x), v_leader))
             .last()
             .unwrap()
+    }
+
+    /// [`reference`] behind a leader `gap_m` ahead at the start (the
+    /// standstill margin off) driving on at `v_leader`.
+    fn behind_driving_on(s0: VehicleState, n: usize, gap_m: f64, v_leader: f64) -> VehicleState {
+        let margin = TrafficSettings::default().standstill_margin_m;
+        reference(
+            s0,
+            n,
+            |k, x| gap_m - margin + v_leader * k as f64 * H - (x - s0.x_m),
+            v_leader,
+        )
     }
 
     /// As [`reference`], the leader's (gap, speed) at control step `k` from
@@ -479,26 +501,6 @@ mod tests {
         }
     }
 
-    /// `step_behind` with the leader's slot given (>= 0: driven here).
-    fn step_behind_slot(
-        f: &mut RouteFleet,
-        slot: i64,
-        leader: (f64, f64, i64),
-        dt: f64,
-    ) -> RouteOutputs {
-        f.plan(&Observations {
-            slots: &[slot],
-            leader_gap_m: &[leader.0],
-            leader_slot: &[leader.2],
-            leader_speed_mps: &[leader.1],
-            lane: &[-1],
-            lane_pos_m: &[f64::NAN],
-            soft: None,
-        })
-        .unwrap();
-        f.step(&[], dt).unwrap()
-    }
-
     #[test]
     fn a_held_leader_drives_on_at_its_observed_speed() {
         // Far behind a slower leader, at its preferred speed: no braking, so
@@ -571,12 +573,7 @@ mod tests {
             assert!((g - w).abs() < 1e-9, "{g} vs {w}");
         }
         // Braking harder than behind a leader driving on.
-        let on = reference(
-            s0,
-            20,
-            |k, x| g0 - margin + 10.0 * k as f64 * H - (x - s0.x_m),
-            10.0,
-        );
+        let on = behind_driving_on(s0, 20, g0, 10.0);
         assert!(got.v_mps < on.v_mps - 0.1, "{} vs {}", got.v_mps, on.v_mps);
         // Closed form of the guarantee: were the leader to brake at b_l from
         // the step's start, it stops at g0 - margin + v^2 / (2 |b_l|) ahead of
@@ -604,20 +601,25 @@ mod tests {
         let margin = TrafficSettings::default().standstill_margin_m;
         let (sa, sb) = (at(60.0, 15.0), at(100.0, 15.0));
         let (ga, gb) = (33.0, 25.0);
-        let (mut f, t) = fleet_with(road(None, true), settings(H));
-        let a = f.add_vehicle(t, None, None, body(), sa, None).unwrap() as i64;
-        let b = f.add_vehicle(t, None, None, body(), sb, None).unwrap() as i64;
-        f.plan(&Observations {
-            slots: &[a, b],
-            leader_gap_m: &[ga, gb],
-            leader_slot: &[b, -1],
-            leader_speed_mps: &[f64::NAN, 0.0],
-            lane: &[-1, -1],
-            lane_pos_m: &[f64::NAN; 2],
-            soft: None,
-        })
-        .unwrap();
-        f.step(&[], 1.0).unwrap();
+        // a behind b, b behind the standing vehicle, one step of dt.
+        let pair = |dt: f64| {
+            let (mut f, t) = fleet_with(road(None, true), settings(H));
+            let a = f.add_vehicle(t, None, None, body(), sa, None).unwrap() as i64;
+            let b = f.add_vehicle(t, None, None, body(), sb, None).unwrap() as i64;
+            f.plan(&Observations {
+                slots: &[a, b],
+                leader_gap_m: &[ga, gb],
+                leader_slot: &[b, -1],
+                leader_speed_mps: &[f64::NAN, 0.0],
+                lane: &[-1, -1],
+                lane_pos_m: &[f64::NAN; 2],
+                soft: None,
+            })
+            .unwrap();
+            f.step(&[], dt).unwrap();
+            (f, a, b)
+        };
+        let (f, a, b) = pair(1.0);
         // b alone: its standing leader's gap shrinks by b's advance only.
         let b_states = reference_states(sb, 20, |_, x| (gb - margin - (x - sb.x_m), 0.0));
         let got_b = f.state(b).unwrap();
@@ -632,35 +634,12 @@ mod tests {
             assert!((g - w).abs() < 1e-9, "{g} vs {w}");
         }
         // Held at its speed at the step's start, b would have left a unaware.
-        let held = reference(
-            sa,
-            20,
-            |k, x| ga - margin + 15.0 * k as f64 * H - (x - sa.x_m),
-            15.0,
-        );
+        let held = behind_driving_on(sa, 20, ga, 15.0);
         assert_eq!(held.v_mps, 15.0, "held, b seemed no reason to brake");
         assert!(got_a.v_mps < 14.8, "a braked with b: {}", got_a.v_mps);
         // At a step below HOLD_BRAKING_MIN_STEP_S the leader is held as before.
-        let (mut f, t) = fleet_with(road(None, true), settings(H));
-        let a = f.add_vehicle(t, None, None, body(), sa, None).unwrap() as i64;
-        let b = f.add_vehicle(t, None, None, body(), sb, None).unwrap() as i64;
-        f.plan(&Observations {
-            slots: &[a, b],
-            leader_gap_m: &[ga, gb],
-            leader_slot: &[b, -1],
-            leader_speed_mps: &[f64::NAN, 0.0],
-            lane: &[-1, -1],
-            lane_pos_m: &[f64::NAN; 2],
-            soft: None,
-        })
-        .unwrap();
-        f.step(&[], 8.0 * H).unwrap();
-        let held = reference(
-            sa,
-            8,
-            |k, x| ga - margin + 15.0 * k as f64 * H - (x - sa.x_m),
-            15.0,
-        );
+        let (f, a, _) = pair(8.0 * H);
+        let held = behind_driving_on(sa, 8, ga, 15.0);
         assert!((f.state(a).unwrap().x_m - held.x_m).abs() < 1e-9);
     }
 
