@@ -14,6 +14,7 @@ import numpy.typing as npt
 __all__ = [
     "__version__",
     "MAX_SIM_STEPS",
+    "HOLD_BRAKING_MIN_STEP_S",
     "BlendtrackError",
     "ConfigError",
     "PathError",
@@ -39,6 +40,10 @@ __all__ = [
 __version__: str
 #: Most steps one ``simulate`` run may record (the core refuses more, before allocating).
 MAX_SIM_STEPS: int
+#: The shortest simulator step (s) over which the traffic engine holds leaders by what they can still do
+#: within the step (a braking one at its mean speed, one it drives with its own control steps, one the
+#: simulator drives at its stop point); the SUMO bridge uses the same bound.
+HOLD_BRAKING_MIN_STEP_S: float
 
 _F64 = npt.NDArray[np.float64]
 _ArrayLike = npt.ArrayLike

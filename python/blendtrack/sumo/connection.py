@@ -13,15 +13,11 @@ import tempfile
 from pathlib import Path
 from typing import Any, Callable
 
+from blendtrack._blendtrack import HOLD_BRAKING_MIN_STEP_S
 from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 
 # True once this process has started a libsumo simulation (see SumoConnection.start).
-#: The shortest SUMO step (s) over which a braking leader SUMO drives is held
-#: at its mean speed (``SumoConnection.step_speed``; the traffic engine's
-#: ``HOLD_BRAKING_MIN_STEP_S`` for the ones it drives).
-HOLD_BRAKING_MIN_STEP_S = 0.5
-
 _LIBSUMO_STARTED = False
 
 

@@ -12,7 +12,8 @@ from typing import Any
 import numpy as np
 
 from blendtrack import ControllerConfig, RouteFleet, VehicleParams
-from blendtrack.sumo.connection import HOLD_BRAKING_MIN_STEP_S, SumoConnection
+from blendtrack._blendtrack import HOLD_BRAKING_MIN_STEP_S
+from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.records import RecordTotals, VehicleRecord
 from blendtrack.sumo.selection import PARAM_PREFIX, Selection

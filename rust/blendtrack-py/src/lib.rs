@@ -37,6 +37,10 @@ mod traffic;
 fn _blendtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add("MAX_SIM_STEPS", blendtrack::limits::MAX_SIM_STEPS)?;
+    m.add(
+        "HOLD_BRAKING_MIN_STEP_S",
+        blendtrack_traffic::HOLD_BRAKING_MIN_STEP_S,
+    )?;
     errors::register(m)?;
     m.add_class::<path::Path>()?;
     m.add_class::<config::ControllerConfig>()?;

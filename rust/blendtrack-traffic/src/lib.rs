@@ -95,6 +95,7 @@ pub use signal::Signal;
 pub use stats::DriveStats;
 pub use step::RouteOutputs;
 pub use stops::HALT_CREEP_M;
+pub use substep::HOLD_BRAKING_MIN_STEP_S;
 
 use blendtrack::{ControllerConfig, Fleet, Path, VehicleParams, VehicleState};
 use error::check_len;

@@ -34,9 +34,12 @@ pub(crate) fn held_speed(v_mps: f64) -> f64 {
     }
 }
 
-/// The shortest simulator step (s) over which a braking leader is held at
-/// its mean speed ([`braking_mean_speed`]).
-pub(crate) const HOLD_BRAKING_MIN_STEP_S: f64 = 0.5;
+/// The shortest simulator step (s) over which leaders are held by what they
+/// can still do within the step: one braking at its mean speed, one driven
+/// here moved with its own control steps, one the simulator drives at its
+/// stop point. Below it a leader is seen again before it gets far. The SUMO
+/// bridge reads it from the binding.
+pub const HOLD_BRAKING_MIN_STEP_S: f64 = 0.5;
 
 /// The speed to hold a leader at over a step of `dt_s`, given its speed
 /// `v_mps` and its acceleration over the last step: its mean speed over the
