@@ -945,7 +945,7 @@ def _sumo_leaders(dt: float, second: tuple[str, float] | None) -> tuple[Any, Fak
 
     conn.get_leader = get_leader  # type: ignore[attr-defined]
     conn.dt = dt  # type: ignore[attr-defined]
-    conn.leader_speeds = {}  # type: ignore[attr-defined]
+    conn.leader_speed = v.getSpeed  # type: ignore[attr-defined]
     return SumoLeaders(conn, {}, 4.0), conn, asked  # type: ignore[arg-type]
 
 

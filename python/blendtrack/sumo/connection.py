@@ -123,8 +123,7 @@ class SumoConnection:
         #: (several vehicles ask about the lanes of one junction): the
         #: cache's own ``__getitem__``, so a repeat costs a dict look-up.
         self.vehicles_on: Callable[[str], Any] = self._lane_ids.__getitem__
-        #: Speeds of SUMO's leaders read this step (``SumoLeaders.correct``),
-        #: which ``step_speed`` then does not read again.
+        #: Speeds of SUMO's leaders read this step (``leader_speed``).
         self.leader_speeds: dict[str, float] = {}
         self._tmp: tempfile.TemporaryDirectory[str] | None = None
 
@@ -268,6 +267,13 @@ class SumoConnection:
         lane_ids = getattr(raw, "lane_getLastStepVehicleIDs", None)
         self.lane_vehicles = lane_ids if callable(lane_ids) else self.sumo.lane.getLastStepVehicleIDs
 
+    def leader_speed(self, vid: str) -> float:
+        """``vid``'s speed (a leader SUMO drives), read from SUMO once a step."""
+        v = self.leader_speeds.get(vid)
+        if v is None:
+            v = self.leader_speeds[vid] = float(self.get_speed(vid))
+        return v
+
     def step_speed(self, vid: str) -> float:
         """The speed of ``vid`` (a leader SUMO drives) to hold it at over the
         coming step: its mean speed over the step if it goes on braking as it
@@ -281,9 +287,7 @@ class SumoConnection:
         ``t`` up to ``dt``). Only at steps of ``HOLD_BRAKING_MIN_STEP_S`` or
         more, as the traffic engine does for the leaders it drives (see
         ``braking_mean_speed`` there)."""
-        v = self.leader_speeds.get(vid)
-        if v is None:
-            v = float(self.get_speed(vid))
+        v = self.leader_speed(vid)
         dt = self.dt
         if not dt >= HOLD_BRAKING_MIN_STEP_S:
             return v

@@ -71,10 +71,7 @@ class SumoLeaders:
         return decel
 
     def _speed_of(self, vid: str) -> float:
-        v = self.conn.leader_speeds.get(vid)
-        if v is None:
-            v = self.conn.leader_speeds[vid] = float(self.conn.get_speed(vid))
-        return max(v, 0.0)
+        return max(self.conn.leader_speed(vid), 0.0)
 
     def correct(self, leaders: list[Any]) -> list[Any]:
         """``leaders`` (``getLeader`` results: None or (id, gap)) with each gap

@@ -79,28 +79,25 @@ pub fn can_stop(cfg: &ControllerConfig, v: f64, gap_m: f64) -> bool {
 }
 
 impl RouteFleet {
-    /// `slot` is a vehicle driven here.
-    fn drives(&self, slot: i64) -> bool {
+    /// The vehicle in `slot` when it is driven here (a leader's slot may be
+    /// anything: < 0 for the simulator's).
+    fn driven_at(&self, slot: i64) -> Option<&Driven> {
         usize::try_from(slot)
             .ok()
             .and_then(|l| self.driven.get(l))
-            .is_some_and(Option::is_some)
+            .and_then(Option::as_ref)
     }
 
     /// A leader's speed: its state's where it is driven here (`slot` >= 0),
     /// else `given`.
     fn speed_of(&self, slot: i64, given: f64) -> f64 {
-        usize::try_from(slot)
-            .ok()
-            .and_then(|l| self.driven.get(l))
-            .and_then(Option::as_ref)
-            .map_or(given, |d| {
-                if d.lead_speed.is_finite() {
-                    d.lead_speed
-                } else {
-                    d.state.v_mps
-                }
-            })
+        self.driven_at(slot).map_or(given, |d| {
+            if d.lead_speed.is_finite() {
+                d.lead_speed
+            } else {
+                d.state.v_mps
+            }
+        })
     }
 
     /// First half of a step: stop lines and leaders. Returns the indices (into
@@ -164,7 +161,7 @@ impl RouteFleet {
             // counts anything closer as a collision: stop further back.
             plan.leader_gap[i] = gap - margin;
             plan.leader_speed[i] = self.speed_of(obs.leader_slot[i], obs.leader_speed_mps[i]);
-            plan.leader_external[i] = !self.drives(obs.leader_slot[i]);
+            plan.leader_external[i] = self.driven_at(obs.leader_slot[i]).is_none();
         }
         if let Some(sl) = &obs.soft {
             if sl.gap_m[i].is_finite() {
