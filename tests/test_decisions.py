@@ -18,7 +18,7 @@ import traci.constants as tc
 from blendtrack.sumo import junctions as jn
 from blendtrack.sumo import lanechange as lc
 from blendtrack.sumo.junctions import Junctions
-from blendtrack.sumo.lanechange import LaneChanges
+from blendtrack.sumo.lanechange import COURTESY_DECEL_MPS2, COURTESY_SPACE_M, LaneChanges
 
 EPS = 1e-6
 
@@ -30,6 +30,7 @@ class FakeVehicle:
         self.cars: dict[str, dict[str, Any]] = {}
         self.neighbours: dict[tuple[str, int], list[tuple[str, float]]] = {}
         self.links: dict[str, list[tuple[Any, ...]]] = {}
+        self.calls: list[tuple[Any, ...]] = []
 
     def add(self, vid: str, **kw: Any) -> None:
         car = {"speed": 0.0, "pos": 0.0, "lat": 0.0, "width": 2.0, "length": 5.0, "min_gap": 2.5, "lane": "e_0",
@@ -76,6 +77,14 @@ class FakeVehicle:
     def getNextLinks(self, vid: str) -> list[tuple[Any, ...]]:
         return self.links.get(vid, [])
 
+    def openGap(self, vid: str, tau: float, space: float, duration: float, rate: float, decel: float, ref: str) -> None:
+        self.cars[vid]  # a vehicle that has left raises, as SUMO does
+        self.calls.append(("open", vid, ref, space, decel))
+
+    def deactivateGapControl(self, vid: str) -> None:
+        self.cars[vid]
+        self.calls.append(("off", vid))
+
 
 class FakeConn:
     def __init__(self) -> None:
@@ -90,6 +99,7 @@ class FakeConn:
             trafficlight=SimpleNamespace(getAllSubscriptionResults=lambda: self.tls_results, getRedYellowGreenState=self.tls_now.__getitem__),
         )
         self.tc = tc
+        self.errors = KeyError
 
     def vehicles_on(self, lane: str) -> list[str]:
         return self.lanes.get(lane, [])
@@ -355,6 +365,51 @@ def test_ask_courtesy_picks_the_nearest_follower_that_can_brake_gently() -> None
     lcs.active = {}
     lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
     assert lcs._courtesy == {}
+    # A SUMO driver is asked to open the gap (open_gaps) instead; one
+    # follower per changer and one changer per follower.
+    assert lcs._asked == {"near": "me"}
+    lcs.ask_courtesy("me2", "t_0", 100.0, 10.0)
+    assert lcs._asked == {"near": "me"}
+    # Not for a change that could wait (due early on a lane that goes on),
+    # nor with RunOptions(open_gaps=False).
+    lcs._asked = {}
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0, urgent=False)
+    assert lcs._asked == {} and lcs._courtesy == {}
+    lcs.open_gaps_on = False
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
+    assert lcs._asked == {}
+
+
+def test_open_gaps_switches_off_before_it_switches_on() -> None:
+    """SUMO keeps one gap controller per reference vehicle, and switching one
+    off clears its reference's entry: every switch-off of a step comes
+    first, a follower held for the same changer is not asked again, and a
+    vehicle that has left is skipped."""
+    conn = FakeConn()
+    v = conn.vehicle
+    for vid in ("a", "b", "x", "y"):
+        v.add(vid)
+    lcs = lane_changes(conn)
+
+    def step(asked: dict[str, str]) -> list[tuple[Any, ...]]:
+        v.calls = []
+        lcs._asked = dict(asked)
+        lcs.open_gaps()
+        assert lcs._asked == {} and lcs._opening == asked
+        return [c[:3] for c in v.calls]
+
+    assert step({"a": "x"}) == [("open", "a", "x")]
+    assert v.calls[0][3:] == (COURTESY_SPACE_M, COURTESY_DECEL_MPS2)
+    # a fell behind or passed: b opens the gap for x; a is switched off first.
+    assert step({"b": "x"}) == [("off", "a"), ("open", "b", "x")]
+    assert step({"b": "x"}) == []
+    # b is asked by another changer: off, then on for y.
+    assert step({"b": "y"}) == [("off", "b"), ("open", "b", "y")]
+    assert step({}) == [("off", "b")]
+    assert lcs.counts["gaps_opened"] == 3
+    # Gone before it could be asked, gone before it was switched off: no error, not counted.
+    assert step({"gone": "x"}) == []
+    assert step({}) == [] and lcs.counts["gaps_opened"] == 3
 
 
 def test_ask_courtesy_needs_more_than_half_a_metre() -> None:

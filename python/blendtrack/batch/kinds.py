@@ -137,6 +137,7 @@ def _run_options(task: dict[str, Any]) -> Any:
         corridor=p.get("corridor", "lane"),
         stop_at_route_end=p.get("stop_at_route_end", False),
         tactical_lane_changes=p.get("tactical_lane_changes", False),
+        open_gaps=p.get("open_gaps", True),
         control_dt_s=p.get("control_dt_s", 0.05),
         config=config,
         vehicle=vehicle,

@@ -125,6 +125,7 @@ _OWN: tuple[Param, ...] = (
     Param("corridor", str, ("sumo", "compare"), "what limits curve speeds: lane (the paper's, default), arc or carriageway", choices=("lane", "arc", "carriageway")),
     Param("stop_at_route_end", bool, ("sumo", "compare"), "controlled vehicles stop at their route's end (default: leave at speed)"),
     Param("tactical_lane_changes", bool, ("sumo", "compare"), "controlled vehicles also change lanes their route does not need (default: no)"),
+    Param("open_gaps", bool, ("sumo", "compare"), "SUMO's drivers are asked to open a gap for a controlled vehicle waiting to change lanes (default: yes)"),
     Param("control_dt_s", float, ("sumo", "compare"), "control rate: control steps per SUMO step = ceil(step / control_dt_s) (s; default 0.05)", 0.0, None, True),
     Param("baseline", str, ("compare",), "car-following model of the baseline", choices=BASELINES),
 )

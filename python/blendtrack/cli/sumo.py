@@ -42,6 +42,7 @@ def _run_options(args: argparse.Namespace, **extra: Any) -> Any:
         corridor=args.corridor,
         stop_at_route_end=args.stop_at_route_end,
         tactical_lane_changes=args.tactical_lane_changes,
+        open_gaps=args.open_gaps,
         control_dt_s=args.control_dt,
         sumo_args=args.sumo_args,
         **extra,
@@ -198,6 +199,13 @@ def _add_driving_options(parser: argparse.ArgumentParser) -> None:
         help="controlled vehicles also change lanes where their route does not need it, when SUMO's lane-change model "
         "would (to overtake, keep right, make room) and the target lane has room (default: only the changes the route needs). "
         "Experimental: tried on 2 networks and 3 seeds; on the urban grid it adds teleports (docs/safety.md)",
+    )
+    parser.add_argument(
+        "--no-open-gaps",
+        dest="open_gaps",
+        action="store_false",
+        help="never ask a SUMO driver to open a gap for a controlled vehicle waiting to change lanes (default: the driver "
+        "behind on the target lane is asked through TraCI openGap, braking at most 2 m/s^2, as SUMO's drivers do for each other)",
     )
 
 

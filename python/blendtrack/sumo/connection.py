@@ -240,6 +240,9 @@ class SumoConnection:
         functions themselves: the Python wrappers around them add about a
         third to each call (measured: setSpeed 405 vs 279 ns)."""
         v = self.sumo.vehicle
+        #: What a call on a vehicle that has left raises (libsumo's or TraCI's
+        #: TraCIException); a lost connection raises something else and ends the run.
+        self.errors: type[Exception] = getattr(self.sumo, "TraCIException", Exception)
         raw: Any = None
         if self.backend == "libsumo":
             try:

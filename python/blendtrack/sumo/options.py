@@ -83,6 +83,12 @@ class RunOptions:
     #: merge). Experimental: tried on 2 networks and 3 seeds; on the urban
     #: grid it adds teleports (README, known limits).
     tactical_lane_changes: bool = False
+    #: Ask the SUMO driver behind a controlled vehicle waiting to change
+    #: lanes to open a gap for it (TraCI ``openGap``, braking at most
+    #: 2 m/s^2), as SUMO's drivers do for each other: see
+    #: ``lanechange.COURTESY_DECEL_MPS2``. Off: blendtrack never influences
+    #: a vehicle it does not drive.
+    open_gaps: bool = True
     #: The control rate (s, > 0): in every SUMO step of ``dt`` the
     #: controllers and the bicycle model run ``ceil(dt / control_dt_s)``
     #: times, with leaders and signals held for the step, and the vehicle is

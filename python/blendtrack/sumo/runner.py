@@ -129,7 +129,7 @@ class SumoRun:
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel,
                                    float(base_config.preferred_acceleration), controlled=self.active)
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel,
-                                 float(base_config.preferred_acceleration))
+                                 float(base_config.preferred_acceleration), open_gaps=options.open_gaps)
         self.stops = Stops(self.conn, self.fleet, self.network, self.tracks.lanes)
         obs_decel = base_config.max_obs_deceleration if "max_obs_deceleration" in options.fixed_keys else base_config.max_deceleration
         self.sumo_leaders = SumoLeaders(self.conn, self.active, max(abs(float(obs_decel)), 0.5))
@@ -228,6 +228,7 @@ class SumoRun:
             "corridor": self.opt.corridor,
             "stop_at_route_end": self.opt.stop_at_route_end,
             "tactical_lane_changes_enabled": self.opt.tactical_lane_changes,
+            "open_gaps_enabled": self.opt.open_gaps,
             "moves_speed_only": self.moves["speed"],
             "moves_none": self.moves["none"],
             "moves_lane_position": self.moves["lane"],
@@ -238,6 +239,7 @@ class SumoRun:
             "lane_changes_aborted": lanes["lane_changes_aborted"],
             "inside_junction_waits": self.junctions.counts["inside_junction_waits"],
             "courtesy_steps": lanes["courtesy_steps"],
+            "gaps_opened": lanes["gaps_opened"],
             "merge_lead_steps": lanes["merge_lead_steps"],
             "tactical_lane_changes": lanes["tactical_lane_changes"],
             **self.stops.counts,
