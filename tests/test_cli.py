@@ -187,3 +187,19 @@ def test_a_config_or_track_that_is_not_a_readable_file_says_why(tmp_path: Path) 
         assert r.returncode == 2 and len(lines) == 1, (args, r.stderr)
         assert why in lines[0] and args[-1] in lines[0], (args, lines[0])
     assert not (tmp_path / "out").exists(), "nothing written"
+
+
+@pytest.mark.parametrize("argv", [["sumo", "run", "x.sumocfg", "--out", "o"], ["compare", "x.sumocfg", "--out", "o"]])
+def test_no_open_gaps_reaches_the_run_options(argv: list[str]) -> None:
+    """`--no-open-gaps` (sumo run and compare) and the sweep parameter
+    `open_gaps` switch off the gaps SUMO's drivers open for controlled
+    vehicles; by default they are on."""
+    from blendtrack.batch.kinds import _run_options as task_options
+    from blendtrack.cli import _build_parser
+    from blendtrack.cli.sumo import _run_options
+
+    parser = _build_parser()
+    assert _run_options(parser.parse_args(argv)).open_gaps is True
+    assert _run_options(parser.parse_args([*argv, "--no-open-gaps"])).open_gaps is False
+    assert task_options({"params": {}, "seed": 0}).open_gaps is True
+    assert task_options({"params": {"open_gaps": False}, "seed": 0}).open_gaps is False
