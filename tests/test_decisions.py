@@ -378,6 +378,20 @@ def test_ask_courtesy_picks_the_nearest_follower_that_can_brake_gently() -> None
     lcs.open_gaps_on = False
     lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
     assert lcs._asked == {}
+    # Not asked, a SUMO driver is passed over for a controlled vehicle
+    # further back, as before gaps were asked of SUMO's drivers.
+    conn.lanes["t_0"] = ["far", "near"]
+    v.cars["near"]["pos"] = 80.0
+    lcs.active = {"far": None}  # type: ignore[dict-item]
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
+    assert lcs._asked == {} and lcs._courtesy == {"far": ("me", pytest.approx(46.5))}
+    lcs._courtesy = {}
+    lcs.open_gaps_on = True
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0, urgent=False)
+    assert lcs._asked == {} and "far" in lcs._courtesy
+    lcs._courtesy = {}
+    lcs.ask_courtesy("me", "t_0", 100.0, 10.0)
+    assert lcs._asked == {"near": "me"} and lcs._courtesy == {}
 
 
 def test_open_gaps_switches_off_before_it_switches_on() -> None:

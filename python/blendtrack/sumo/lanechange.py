@@ -401,8 +401,10 @@ class LaneChanges:
             closing = max(float(v.getSpeed(fid)) - max(speed, 0.0), 0.0)
             if gap > 0.5 and closing * closing <= 2.0 * COURTESY_DECEL_MPS2 * gap:
                 if fid not in self.active:
+                    if not (urgent and self.open_gaps_on):
+                        continue  # not asked: as before openGap, a controlled one further back may be
                     # One follower per changer, one changer per follower (open_gaps).
-                    if urgent and self.open_gaps_on and fid not in self._asked and vid not in self._asked.values():
+                    if fid not in self._asked and vid not in self._asked.values():
                         self._asked[fid] = vid
                     return
                 old = self._courtesy.get(fid)
