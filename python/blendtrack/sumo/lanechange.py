@@ -329,7 +329,6 @@ class LaneChanges:
         current = int(index)
         direction = 1 if target > current else -1
         target_lane = f"{edge}_{target}"
-        lane_length = float(self.network.net().getLane(lane_id).getLength())
         # SUMO's drivers are asked for a gap only where the lane ends for the
         # route on this edge, not for a change due early on a lane that goes
         # on (Eccles 30 %, seeds 0-11: asked for every waiting change,
@@ -338,6 +337,7 @@ class LaneChanges:
         if not could_change_lane(self.conn.lane_change_state, act.vid, direction):
             self.wait_for_gap(act.vid, direction, target_lane, pos, speed, urgent)
             return
+        lane_length = float(self.network.net().getLane(lane_id).getLength())
         length = change_length(speed, lane_length - pos - 1.0)
         if length < 8.0:
             return
