@@ -68,13 +68,16 @@ def _scheduled(routes: str) -> int:
     return n
 
 
-def _scenario(net: Path, folder: Path, routes: str, action: str = "teleport") -> sumo.Scenario:
+def _scenario(net: Path, folder: Path, routes: str, action: str = "teleport", junctions: bool = True) -> sumo.Scenario:
+    """The scenario; ``junctions`` False leaves SUMO's collision.check-junctions
+    out of its configuration (as most published scenarios do)."""
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "x.rou.xml").write_text(routes)
+    check = '<collision.check-junctions value="true"/>' if junctions else ""
     (folder / "x.sumocfg").write_text(f"""<configuration>
   <input><net-file value="{net}"/><route-files value="x.rou.xml"/></input>
   <time><begin value="0"/><step-length value="0.1"/></time>
-  <processing><collision.action value="{action}"/><collision.check-junctions value="true"/></processing>
+  <processing><collision.action value="{action}"/>{check}</processing>
   <report><no-step-log value="true"/><no-warnings value="false"/></report>
 </configuration>""")
     return sumo.resolve_scenario(folder / "x.sumocfg")
@@ -192,6 +195,64 @@ def test_collisions_are_counted_as_sumo_records_them_under_every_action(net: Pat
     if action == "teleport":
         # The collider is teleported: counted as a collision and as a teleport.
         assert s["teleports_controlled"] >= 1
+
+
+#: The controlled "c" on W -> E and the background "b" on S -> N, b still far from the junction.
+CROSSING = """<routes>
+""" + VTYPES + """  <route id="we" edges="WJ JE"/><route id="sn" edges="SJ JN"/>
+  <vehicle id="c" type="auto" route="we" depart="0" departPos="150" departSpeed="5"/>
+  <vehicle id="b" type="human" route="sn" depart="0" departPos="20" departSpeed="0"/>
+</routes>"""
+
+
+def _put_across(run: SumoRun, t: float) -> None:
+    """Once c is inside the junction, b is moved onto its own way through
+    the junction (the S -> N junction lane) with its body across c's: the
+    two ways cross at right angles, so the shapes overlap in the junction,
+    not along a lane."""
+    v, lane = run.sumo.vehicle, run.sumo.lane
+    if getattr(run, "_across", False) or "c" not in run.active or not v.getLaneID("c").startswith(":"):
+        return
+    via = next(link[4] for link in lane.getLinks("SJ_0") if link[0] == "JN_0")
+    (x0, y0), *_ = lane.getShape(via)
+    _, cy = v.getPosition("c")
+    pos = min(max(cy - y0 + 2.0, 4.5), lane.getLength(via))
+    v.setSpeedMode("b", 0)
+    v.moveTo("b", via, pos)
+    v.setSpeed("b", 0.0)
+    run._across = True  # type: ignore[attr-defined]
+
+
+@pytest.mark.parametrize("user_args", [(), ("--collision.check-junctions", "false")])
+def test_a_collision_inside_a_junction_is_counted_where_the_scenario_does_not_ask(
+        net: Path, tmp_path: Path, user_args: tuple[str, ...]) -> None:
+    """SUMO checks collisions inside junctions only when told to; blendtrack
+    tells it unless the scenario or the user says otherwise. Without it (the
+    user's --sumo-args turn it off here) the same overlap goes uncounted."""
+    sc = _scenario(net, tmp_path / "sc", CROSSING, "warn", junctions=False)
+    out = tmp_path / "o"
+    run = SumoRun(sc, RunOptions(controlled_ids=("c",), end_s=40, progress=False, sumo_args=user_args), out)
+    cmd = run.conn.command()
+    assert cmd.count("--collision.check-junctions") == 1, cmd
+    assert cmd[cmd.index("--collision.check-junctions") + 1] == ("false" if user_args else "true"), cmd
+    run.step_hooks.append(_put_across)
+    result = run.run()
+    report.write_vehicles_csv(result.records, out / "vehicles.csv")
+    sumo._count_collisions(result, out)
+    assert getattr(run, "_across", False)
+    with open(out / "collisions.csv") as f:
+        rows = list(csv.DictReader(f))
+    if user_args:
+        assert result.summary["collisions_all"] == 0 and rows == []
+    else:
+        assert result.summary["collisions_with_controlled"] >= 1, rows
+        assert {r["type"] for r in rows} == {"junction"} and all(r["controlled_involved"] == "1" for r in rows), rows
+
+
+def test_the_scenarios_own_junction_check_is_not_overridden(net: Path, tmp_path: Path) -> None:
+    sc = _scenario(net, tmp_path / "sc", CROSSING, junctions=True)
+    cmd = SumoRun(sc, RunOptions(controlled_ids=("c",), end_s=1, progress=False), tmp_path / "o").conn.command()
+    assert "--collision.check-junctions" not in cmd, cmd
 
 
 def test_emergency_brakings_are_counted_by_sumos_rule(net: Path, tmp_path: Path) -> None:
