@@ -329,3 +329,71 @@ def test_libsumo_and_traci_drive_the_crossing_alike(tmp_path: Path) -> None:
     # first 200 s arrived (a vehicle standing inside the junction blocks all).
     recs = [r for r in res.records if r.depart_s < 200.0]
     assert recs and all(r.reason == "arrived" for r in recs), [(r.vid, r.reason) for r in recs if r.reason != "arrived"]
+
+
+def _fanout(tmp: Path) -> Path:
+    """A one-lane road ``AJ`` that widens to two lanes at junction ``J``
+    (both lanes of ``JB`` fed from ``AJ_0``: their junction lanes start at
+    one point and part); ``JB_0`` leads on to ``BD`` only, ``JB_1`` to ``BC``.
+    The background ``b`` takes the right branch, the controlled ``c`` 40 m
+    behind it the left one; 1 s steps."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    (tmp / "n.nod.xml").write_text('<nodes><node id="A" x="0" y="0"/><node id="J" x="200" y="0" type="priority"/>'
+                                   '<node id="B" x="400" y="0"/>'
+                                   '<node id="C" x="600" y="100"/><node id="D" x="600" y="-100"/></nodes>\n')
+    (tmp / "n.edg.xml").write_text(f'<edges><edge id="AJ" from="A" to="J" numLanes="1" speed="{SPEED}"/>'
+                                   f'<edge id="JB" from="J" to="B" numLanes="2" speed="{SPEED}"/>'
+                                   f'<edge id="BC" from="B" to="C" numLanes="1" speed="{SPEED}"/>'
+                                   f'<edge id="BD" from="B" to="D" numLanes="1" speed="{SPEED}"/></edges>\n')
+    (tmp / "n.con.xml").write_text('<connections><connection from="AJ" to="JB" fromLane="0" toLane="0"/>'
+                                   '<connection from="AJ" to="JB" fromLane="0" toLane="1"/>'
+                                   '<connection from="JB" to="BD" fromLane="0" toLane="0"/>'
+                                   '<connection from="JB" to="BC" fromLane="1" toLane="0"/></connections>\n')
+    proc = subprocess.run([_netconvert(), "-n", str(tmp / "n.nod.xml"), "-e", str(tmp / "n.edg.xml"), "-x", str(tmp / "n.con.xml"),
+                           "-o", str(tmp / "n.net.xml"), "--no-turnarounds", "true"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    (tmp / "r.rou.xml").write_text(
+        '<routes><vType id="bg" sigma="0"/><vType id="ctl"><param key="blendtrack.controlled" value="true"/></vType>'
+        '<route id="right" edges="AJ JB BD"/><route id="left" edges="AJ JB BC"/>'
+        '<vehicle id="b" type="bg" route="right" depart="0" departPos="150" departSpeed="5"/>'
+        '<vehicle id="c" type="ctl" route="left" depart="0" departPos="110" departSpeed="5"/></routes>\n')
+    cfg = tmp / "run.sumocfg"
+    cfg.write_text('<configuration><input><net-file value="n.net.xml"/><route-files value="r.rou.xml"/></input>'
+                   '<time><end value="120"/><step-length value="1"/></time></configuration>\n')
+    return cfg
+
+
+def _crawl_in_junction(run: SumoRun, t: float) -> None:
+    """``b`` slows (3 m/s^2) to 2 m/s before the junction and to 0.4 m/s in
+    it, crawling on for 40 s with its body on the stretch where the two
+    branches have not yet parted; then it drives on."""
+    v = run.sumo.vehicle
+    if "b" not in v.getIDList():
+        return
+    lane, pos, speed = v.getLaneID("b"), float(v.getLanePosition("b")), float(v.getSpeed("b"))
+    start = getattr(run, "_crawl_from", None)
+    if start is None and lane == "AJ_0" and pos > 150.0:
+        v.setSpeedMode("b", 0)
+        v.setSpeed("b", max(2.0, speed - 3.0))
+    elif start is None and lane != "AJ_0":
+        run._crawl_from = start = t  # type: ignore[attr-defined]
+    if start is not None:
+        v.setSpeed("b", max(0.4, speed - 3.0) if t < start + 40.0 else -1.0)
+
+
+def test_a_vehicle_crawling_on_the_other_branch_of_a_fanout_is_not_run_into(tmp_path: Path) -> None:
+    """A vehicle from the same lane that entered the junction ahead and
+    drives on is followed, not waited for; but one crawling with its body
+    still across the controlled vehicle's way is waited for. Before, any
+    such vehicle moving at SUMO's halting speed or more counted as one to
+    follow: the controlled vehicle drove into it (Bologna, junction 56m)."""
+    cfg = _fanout(tmp_path / "net")
+    watch = Watch()
+    watch.extra.append(_crawl_in_junction)
+    run, s = _run(cfg, tmp_path / "o", watch, controlled_ids=("c",))
+    assert hasattr(run, "_crawl_from")
+    _no_incidents(run, tmp_path / "o")
+    # Both got through once b went on.
+    assert _arrived(run) == 1 and s["controlled_vehicles"] == 1
+    lanes = [lane for _, lane, _, _ in watch.rows["c"]]
+    assert "JB_1" in lanes and "JB_0" not in lanes, lanes

@@ -43,6 +43,13 @@ HALT_SPEED_MPS = 0.1
 #: ... with its front within this of its stop line (m; it stops
 #: ``standstill_margin_m``, 1 m, short of it).
 HALT_NEAR_M = 3.0
+#: A vehicle that entered a junction from the same lane and is still in the
+#: way of one about to enter is followed, not waited for, only while it
+#: moves at this speed or more (m/s) and at least as fast as the one behind:
+#: it then leaves the way ahead of it. Slower, it is waited for. (SUMO's
+#: halting speed alone, 0.1 m/s, let a vehicle crawling at 0.4-0.5 m/s on
+#: the other branch of a lane that fans out be run into: Bologna, 56m.)
+FOLLOW_MIN_SPEED_MPS = 2.0
 #: A vehicle inside a junction is in the way of one about to enter when its
 #: body comes within this much of the half width of the entering vehicle's
 #: path through the junction (m).
@@ -319,19 +326,23 @@ class Junctions:
         reach = 0.5 * float(veh.getWidth(vid)) + INSIDE_MARGIN_M
         origin = self.network.from_lane(via)
         from_lane = self.network.from_lane
+        follow_speed = None
         for lane, on in [(lane, on) for lane in lanes if (on := vehicles_on(lane))]:
             # A vehicle that entered from the same lane and drives on ahead
-            # (its back past the line, at SUMO's halting speed or more) is
-            # one to follow, not a foe: waiting until it had left the path,
-            # a straight-on vehicle behind left turners crossed a green light
-            # only after each of them (Bologna, 204c).
+            # (its back past the line, at FOLLOW_MIN_SPEED_MPS or more and
+            # no slower than this one) is one to follow, not a foe: waiting
+            # until it had left the path, a straight-on vehicle behind left
+            # turners crossed a green light only after each of them
+            # (Bologna, 204c).
             same = origin is not None and from_lane(lane) == origin
             for other in on:
                 if other == vid:
                     continue
-                if same and float(get_speed(other)) >= HALT_SPEED_MPS \
-                        and float(get_pos(other)) >= float(veh.getLength(other)):
-                    continue
+                if same and float(get_pos(other)) >= float(veh.getLength(other)):
+                    if follow_speed is None:
+                        follow_speed = max(FOLLOW_MIN_SPEED_MPS, float(get_speed(vid)))
+                    if float(get_speed(other)) >= follow_speed:
+                        continue
                 body, half = body_segment(veh, other)
                 if segments_distance(body, path) < reach + half:
                     self.counts["inside_junction_waits"] += 1
