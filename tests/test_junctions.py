@@ -381,17 +381,38 @@ def _crawl_in_junction(run: SumoRun, t: float) -> None:
         v.setSpeed("b", max(0.4, speed - 3.0) if t < start + 40.0 else -1.0)
 
 
-def test_a_vehicle_crawling_on_the_other_branch_of_a_fanout_is_not_run_into(tmp_path: Path) -> None:
+def _stand_past_exit(run: SumoRun, t: float) -> None:
+    """As ``_crawl_in_junction``, but ``b`` stops for 30 s with its front
+    0.5-0.9 m onto ``JB_0``, its back still in the junction."""
+    v = run.sumo.vehicle
+    if "b" not in v.getIDList():
+        return
+    lane, pos = v.getLaneID("b"), float(v.getLanePosition("b"))
+    stop = getattr(run, "_stand_from", None)
+    if stop is None and lane == "JB_0" and pos >= 0.5:
+        run._stand_from = stop = t  # type: ignore[attr-defined]
+    if stop is not None:
+        v.setSpeed("b", 0.0 if t < stop + 30.0 else -1.0)
+    else:
+        _crawl_in_junction(run, t)
+
+
+@pytest.mark.parametrize("hook", [_crawl_in_junction, _stand_past_exit])
+def test_a_vehicle_on_the_other_branch_of_a_fanout_is_not_run_into(tmp_path: Path, hook: Any) -> None:
     """A vehicle from the same lane that entered the junction ahead and
     drives on is followed, not waited for; but one crawling with its body
-    still across the controlled vehicle's way is waited for. Before, any
-    such vehicle moving at SUMO's halting speed or more counted as one to
-    follow: the controlled vehicle drove into it (Bologna, junction 56m)."""
+    still across the controlled vehicle's way, or standing just past the
+    exit of its branch with its back in the junction, is waited for.
+    Before, any such vehicle moving at SUMO's halting speed or more counted
+    as one to follow, and one past the exit was not looked at: the
+    controlled vehicle drove into both (Bologna, junctions 56m and 8)."""
     cfg = _fanout(tmp_path / "net")
     watch = Watch()
-    watch.extra.append(_crawl_in_junction)
+    watch.extra.append(hook)
     run, s = _run(cfg, tmp_path / "o", watch, controlled_ids=("c",))
     assert hasattr(run, "_crawl_from")
+    if hook is _stand_past_exit:
+        assert hasattr(run, "_stand_from")
     _no_incidents(run, tmp_path / "o")
     # Both got through once b went on.
     assert _arrived(run) == 1 and s["controlled_vehicles"] == 1

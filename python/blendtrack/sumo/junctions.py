@@ -347,6 +347,19 @@ class Junctions:
                 if segments_distance(body, path) < reach + half:
                     self.counts["inside_junction_waits"] += 1
                     return True
+        # A vehicle that has left the junction by another way with its back
+        # still in it (standing just past the exit, say): SUMO lists it on
+        # the lane out only. Not checked, a controlled vehicle swept through
+        # the back of one standing 0.9 m past the exit of the neighbouring
+        # branch of a lane that fans out (Bologna, 8).
+        for lane in self.network.junction_exits(via):
+            for other in vehicles_on(lane):
+                if other == vid or float(get_pos(other)) >= float(veh.getLength(other)):
+                    continue
+                body, half = body_segment(veh, other)
+                if segments_distance(body, path) < reach + half:
+                    self.counts["inside_junction_waits"] += 1
+                    return True
         return False
 
     def _held_at_line(self, other: str) -> bool:

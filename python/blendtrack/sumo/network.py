@@ -32,6 +32,9 @@ class Network:
         #: Per junction entry lane: (its path through the junction, the other
         #: junction lanes that come near it); see ``junction_lanes``.
         self._inside: dict[str, tuple[np.ndarray, tuple[str, ...]]] = {}
+        #: Per junction entry lane: the lanes out of the junction after those
+        #: near lanes (its own way's excepted); see ``junction_exits``.
+        self._exits: dict[str, tuple[str, ...]] = {}
         #: Per junction entry lane: its internal waiting point and the distance to it.
         self._waiting_points: dict[str, tuple[str | None, float]] = {}
         self._foes: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
@@ -113,6 +116,7 @@ class Network:
             c = self.connection_of(via)
             path = np.zeros((0, 2))
             near: list[str] = []
+            exits: list[str] = []
             if c is not None:
                 chain = [part.getID() for part in _via_chain(net, c)]
                 own = chain[chain.index(via):] if via in chain else chain
@@ -120,6 +124,7 @@ class Network:
                     path = np.concatenate([np.asarray(net.getLane(x).getShape(), dtype=float)[:, :2] for x in own])
                     node = c.getFrom().getToNode()
                     seen = set(chain)
+                    own_exit = c.getToLane().getID()
                     for other in node.getConnections():
                         for part in _via_chain(net, other):
                             lid = part.getID()
@@ -129,9 +134,21 @@ class Network:
                             pts = np.asarray(part.getShape(), dtype=float)[:, :2]
                             if segments_distance(pts, path) < INSIDE_LANE_REACH_M:
                                 near.append(lid)
+                                out = other.getToLane().getID()
+                                if out != own_exit and out not in exits:
+                                    exits.append(out)
             hit = (path, tuple(near))
             self._inside[via] = hit
+            self._exits[via] = tuple(exits)
         return hit
+
+    def junction_exits(self, via: str) -> tuple[str, ...]:
+        """The lanes out of the junction that the near lanes of
+        ``junction_lanes(via)`` lead onto, ``via``'s own way's excepted: a
+        vehicle there whose back is still in the junction stands in the
+        near lane, though SUMO lists it on the lane its front is on."""
+        self.junction_lanes(via)
+        return self._exits.get(via, ())
 
     def waiting_point_after(self, via: str) -> tuple[str | None, float]:
         """The internal waiting point on the junction path that starts with
