@@ -184,15 +184,34 @@ impl Controller {
         obstacles: &[Obstacle],
         speed_limit_mps: Option<f64>,
     ) -> Result<ControlOutput, StateError> {
+        self.step_limited_along(
+            measured,
+            measured.heading_vec(),
+            alpha,
+            obstacles,
+            speed_limit_mps,
+        )
+    }
+
+    /// [`Self::step_limited`] given the measured heading's `(cos, sin)`
+    /// ([`VehicleState::heading_vec`]), for a caller that needs it too.
+    pub(crate) fn step_limited_along(
+        &mut self,
+        measured: &VehicleState,
+        heading: Vector2<f64>,
+        alpha: f64,
+        obstacles: &[Obstacle],
+        speed_limit_mps: Option<f64>,
+    ) -> Result<ControlOutput, StateError> {
         match speed_limit_mps {
             Some(limit) if limit > 0.0 && limit < self.cfg.preferred_speed => {
                 let saved = self.cfg.preferred_speed;
                 self.cfg.preferred_speed = limit;
-                let out = self.step_with_alpha(measured, alpha, obstacles);
+                let out = self.step_along(measured, heading, alpha, obstacles);
                 self.cfg.preferred_speed = saved;
                 out
             }
-            _ => self.step_with_alpha(measured, alpha, obstacles),
+            _ => self.step_along(measured, heading, alpha, obstacles),
         }
     }
 
@@ -246,6 +265,19 @@ impl Controller {
         alpha: f64,
         obstacles: &[Obstacle],
     ) -> Result<ControlOutput, StateError> {
+        self.step_along(measured, measured.heading_vec(), alpha, obstacles)
+    }
+
+    /// [`Self::step_with_alpha`] given the measured heading's `(cos, sin)`
+    /// (`heading`, [`VehicleState::heading_vec`]).
+    #[inline(always)]
+    fn step_along(
+        &mut self,
+        measured: &VehicleState,
+        heading: Vector2<f64>,
+        alpha: f64,
+        obstacles: &[Obstacle],
+    ) -> Result<ControlOutput, StateError> {
         check_step_inputs(measured, alpha)?;
         // Borrowed, not cloned: an Arc clone per step is an atomic write to
         // a counter every vehicle on the track shares, which makes threads
@@ -256,7 +288,7 @@ impl Controller {
         let dir = self.cfg.direction;
         let speed = measured.v_mps.abs();
         let rear_pt = measured.rear();
-        let h = measured.heading_vec();
+        let h = heading;
         let front_pt: Point2<f64> = rear_pt + h * e;
 
         // Hints moved on by the distance travelled since the last step; a
@@ -358,6 +390,7 @@ impl Controller {
     /// The blend's two commands (NaN for a law a baseline does not use),
     /// the alpha it used and the unclamped steering.
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn lateral_commands(
         &self,
         path: &Path,
