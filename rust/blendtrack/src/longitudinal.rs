@@ -294,14 +294,17 @@ struct Seg {
 }
 
 /// The vertices of a run of border segments, as a strip: every vertex lies
-/// within `half_width` of the chord from `p0` (the run's first vertex) to
-/// `p1` (its last). `half_width` includes the margin [`Ray::misses_strip`]
+/// within `half_width` of the chord from the run's first vertex to its last
+/// (`p1`). `half_width` includes the margin [`Ray::misses_strip`]
 /// relies on.
 #[derive(Debug, Clone, Copy)]
 struct Strip {
-    p0: Point2<f64>,
+    /// The chord's end, the run's last vertex (its start, the run's first
+    /// vertex, is the first segment's `a`, and the last run's `p1`).
     p1: Point2<f64>,
     half_width: f64,
+    /// The end arc length of the run's last segment (its `end_s`).
+    end_s: f64,
 }
 
 /// The margin (m) added to a strip's half-width for [`Ray::misses_strip`]:
@@ -450,6 +453,7 @@ impl Border {
         let pts: Vec<Point2<f64>> = idx.iter().map(|&i| full[i]).collect();
         let n = pts.len();
         let n_seg = if closed { n } else { n.saturating_sub(1) };
+        let s: Vec<f64> = idx.iter().map(|&i| vertex_s[i]).collect();
         let far = pts
             .iter()
             .any(|p| !(p.x.abs() <= STRIP_MAX_COORDINATE_M && p.y.abs() <= STRIP_MAX_COORDINATE_M));
@@ -471,10 +475,13 @@ impl Border {
                 } else {
                     1.02 * w + STRIP_LENGTH_MARGIN * longest + STRIP_MARGIN_M
                 };
-                Strip { p0, p1, half_width }
+                Strip {
+                    p1,
+                    half_width,
+                    end_s: if end < n { s[end] } else { path_length },
+                }
             })
             .collect();
-        let s: Vec<f64> = idx.iter().map(|&i| vertex_s[i]).collect();
         let segs = (0..n_seg)
             .map(|k| Seg {
                 a: pts[k],
@@ -648,27 +655,24 @@ impl Border {
         };
         scan.update_stop();
         let strips = &self.strips[..];
-        // The side of the current run's first chord end, when the last run
-        // (ending there) computed it.
-        let mut s_first = f64::NAN;
-        let mut visited = 0;
-        while visited < n_seg {
-            let run_index = k / RUN_SEGMENTS;
-            // On to the next run's start, at most every segment once.
-            let end = ((run_index + 1) * RUN_SEGMENTS)
-                .min(n_seg)
-                .min(k + (n_seg - visited));
-            visited += end - k;
-            let strip = &strips[run_index];
-            let s0 = if s_first.is_nan() {
-                ray.side(&strip.p0)
-            } else {
-                s_first
-            };
+        let mut r = k / RUN_SEGMENTS;
+        // The side of the current run's first vertex (the last run's `p1`).
+        let mut s0 = ray.side(&segs[r * RUN_SEGMENTS].a);
+        // Segments not yet visited (each is visited at most once).
+        let mut left = n_seg;
+        loop {
+            let strip = &strips[r];
+            let run_end = ((r + 1) * RUN_SEGMENTS).min(n_seg);
+            let end = run_end.min(k + left);
+            left -= end - k;
             let s1 = ray.side(&strip.p1);
-            s_first = s1;
             if ray.misses_strip(s0, s1, strip.half_width) {
-                let mut scanned = segs[end - 1].end_s - start_s;
+                let end_s = if end == run_end {
+                    strip.end_s
+                } else {
+                    segs[end - 1].end_s
+                };
+                let mut scanned = end_s - start_s;
                 if self.closed && scanned < 0.0 {
                     scanned += self.path_length;
                 }
@@ -688,12 +692,18 @@ impl Border {
                     break;
                 }
             }
+            if left == 0 {
+                break;
+            }
+            s0 = s1;
             k = end;
+            r += 1;
             if k >= n_seg {
                 if !self.closed {
                     break;
                 }
                 k = 0;
+                r = 0;
             }
         }
         scan.best
@@ -1341,7 +1351,8 @@ mod tests {
             let cor = Corridor::new(path, &ControllerConfig::default());
             for b in [&cor.left_simple, &cor.right_simple] {
                 for (r, strip) in b.strips.iter().enumerate() {
-                    let chord = strip.p1 - strip.p0;
+                    let p0 = b.segs[r * RUN_SEGMENTS].a;
+                    let chord = strip.p1 - p0;
                     let along = if chord.norm() > 0.0 {
                         chord / chord.norm()
                     } else {
@@ -1357,10 +1368,10 @@ mod tests {
                                     c * along.x - s * along.y,
                                     s * along.x + c * along.y,
                                 );
-                                let o = strip.p0 - along * back
-                                    + normal * (side * off * strip.half_width);
+                                let o =
+                                    p0 - along * back + normal * (side * off * strip.half_width);
                                 let ray = Ray::new(&o, &u);
-                                let (s0, s1) = (ray.side(&strip.p0), ray.side(&strip.p1));
+                                let (s0, s1) = (ray.side(&p0), ray.side(&strip.p1));
                                 if !ray.misses_strip(s0, s1, strip.half_width) {
                                     continue;
                                 }
