@@ -362,12 +362,15 @@ impl Controller {
         };
         // A finite state within range gives a finite command; should a
         // corner of the geometry still overflow, say so rather than return NaN.
-        for (field, value) in [
-            ("steering command", steering),
-            ("acceleration command", accel),
-        ] {
-            if !value.is_finite() {
-                return Err(StateError::NonFinite { field, value });
+        // (`v - v` is 0 for a finite `v`: one comparison in the common case.)
+        if (steering - steering) + (accel - accel) != 0.0 {
+            for (field, value) in [
+                ("steering command", steering),
+                ("acceleration command", accel),
+            ] {
+                if !value.is_finite() {
+                    return Err(StateError::NonFinite { field, value });
+                }
             }
         }
         Ok(ControlOutput {
@@ -438,7 +441,28 @@ impl Controller {
 }
 
 /// A finite state within range and an alpha in [0, 1], or the error naming what is not.
+#[inline(always)]
 fn check_step_inputs(measured: &VehicleState, alpha: f64) -> Result<(), StateError> {
+    // The common case in a few comparisons: `v - v` is 0 for a finite `v`,
+    // NaN otherwise, so the sum is 0 exactly when all five are finite.
+    let m = measured;
+    let finite = (m.x_m - m.x_m)
+        + (m.y_m - m.y_m)
+        + (m.theta_rad - m.theta_rad)
+        + (m.v_mps - m.v_mps)
+        + (m.delta_rad - m.delta_rad)
+        == 0.0;
+    let lim = crate::limits::MAX_COORDINATE_M;
+    if finite && m.x_m.abs() <= lim && m.y_m.abs() <= lim && (0.0..=1.0).contains(&alpha) {
+        return Ok(());
+    }
+    check_step_inputs_in_full(measured, alpha)
+}
+
+/// [`check_step_inputs`] field by field: the error names the first bad one.
+#[cold]
+#[inline(never)]
+fn check_step_inputs_in_full(measured: &VehicleState, alpha: f64) -> Result<(), StateError> {
     measured.check_finite()?;
     for (name, value) in [("x_m", measured.x_m), ("y_m", measured.y_m)] {
         if value.abs() > crate::limits::MAX_COORDINATE_M {
