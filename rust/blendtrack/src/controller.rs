@@ -362,8 +362,7 @@ impl Controller {
         };
         // A finite state within range gives a finite command; should a
         // corner of the geometry still overflow, say so rather than return NaN.
-        // (`v - v` is 0 for a finite `v`: one comparison in the common case.)
-        if (steering - steering) + (accel - accel) != 0.0 {
+        if !all_finite([steering, accel]) {
             for (field, value) in [
                 ("steering command", steering),
                 ("acceleration command", accel),
@@ -443,20 +442,26 @@ impl Controller {
 /// A finite state within range and an alpha in [0, 1], or the error naming what is not.
 #[inline(always)]
 fn check_step_inputs(measured: &VehicleState, alpha: f64) -> Result<(), StateError> {
-    // The common case in a few comparisons: `v - v` is 0 for a finite `v`,
-    // NaN otherwise, so the sum is 0 exactly when all five are finite.
+    // The common case in a few comparisons.
     let m = measured;
-    let finite = (m.x_m - m.x_m)
-        + (m.y_m - m.y_m)
-        + (m.theta_rad - m.theta_rad)
-        + (m.v_mps - m.v_mps)
-        + (m.delta_rad - m.delta_rad)
-        == 0.0;
+    let finite = all_finite([m.x_m, m.y_m, m.theta_rad, m.v_mps, m.delta_rad]);
     let lim = crate::limits::MAX_COORDINATE_M;
     if finite && m.x_m.abs() <= lim && m.y_m.abs() <= lim && (0.0..=1.0).contains(&alpha) {
         return Ok(());
     }
     check_step_inputs_in_full(measured, alpha)
+}
+
+/// True when every value is finite, in one comparison: `v - v` is 0 for a
+/// finite `v` and NaN otherwise, so the sum is 0 exactly when all are.
+#[inline(always)]
+#[allow(clippy::eq_op)]
+fn all_finite<const N: usize>(values: [f64; N]) -> bool {
+    let mut sum = values[0] - values[0];
+    for v in &values[1..] {
+        sum += v - v;
+    }
+    sum == 0.0
 }
 
 /// [`check_step_inputs`] field by field: the error names the first bad one.
