@@ -184,15 +184,34 @@ impl Controller {
         obstacles: &[Obstacle],
         speed_limit_mps: Option<f64>,
     ) -> Result<ControlOutput, StateError> {
+        self.step_limited_along(
+            measured,
+            measured.heading_vec(),
+            alpha,
+            obstacles,
+            speed_limit_mps,
+        )
+    }
+
+    /// [`Self::step_limited`] given the measured heading's `(cos, sin)`
+    /// ([`VehicleState::heading_vec`]), for a caller that needs it too.
+    pub(crate) fn step_limited_along(
+        &mut self,
+        measured: &VehicleState,
+        heading: Vector2<f64>,
+        alpha: f64,
+        obstacles: &[Obstacle],
+        speed_limit_mps: Option<f64>,
+    ) -> Result<ControlOutput, StateError> {
         match speed_limit_mps {
             Some(limit) if limit > 0.0 && limit < self.cfg.preferred_speed => {
                 let saved = self.cfg.preferred_speed;
                 self.cfg.preferred_speed = limit;
-                let out = self.step_with_alpha(measured, alpha, obstacles);
+                let out = self.step_along(measured, heading, alpha, obstacles);
                 self.cfg.preferred_speed = saved;
                 out
             }
-            _ => self.step_with_alpha(measured, alpha, obstacles),
+            _ => self.step_along(measured, heading, alpha, obstacles),
         }
     }
 
@@ -246,6 +265,19 @@ impl Controller {
         alpha: f64,
         obstacles: &[Obstacle],
     ) -> Result<ControlOutput, StateError> {
+        self.step_along(measured, measured.heading_vec(), alpha, obstacles)
+    }
+
+    /// [`Self::step_with_alpha`] given the measured heading's `(cos, sin)`
+    /// (`heading`, [`VehicleState::heading_vec`]).
+    #[inline(always)]
+    fn step_along(
+        &mut self,
+        measured: &VehicleState,
+        heading: Vector2<f64>,
+        alpha: f64,
+        obstacles: &[Obstacle],
+    ) -> Result<ControlOutput, StateError> {
         check_step_inputs(measured, alpha)?;
         // Borrowed, not cloned: an Arc clone per step is an atomic write to
         // a counter every vehicle on the track shares, which makes threads
@@ -256,7 +288,7 @@ impl Controller {
         let dir = self.cfg.direction;
         let speed = measured.v_mps.abs();
         let rear_pt = measured.rear();
-        let h = measured.heading_vec();
+        let h = heading;
         let front_pt: Point2<f64> = rear_pt + h * e;
 
         // Hints moved on by the distance travelled since the last step; a
@@ -330,12 +362,14 @@ impl Controller {
         };
         // A finite state within range gives a finite command; should a
         // corner of the geometry still overflow, say so rather than return NaN.
-        for (field, value) in [
-            ("steering command", steering),
-            ("acceleration command", accel),
-        ] {
-            if !value.is_finite() {
-                return Err(StateError::NonFinite { field, value });
+        if !all_finite([steering, accel]) {
+            for (field, value) in [
+                ("steering command", steering),
+                ("acceleration command", accel),
+            ] {
+                if !value.is_finite() {
+                    return Err(StateError::NonFinite { field, value });
+                }
             }
         }
         Ok(ControlOutput {
@@ -358,6 +392,7 @@ impl Controller {
     /// The blend's two commands (NaN for a law a baseline does not use),
     /// the alpha it used and the unclamped steering.
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn lateral_commands(
         &self,
         path: &Path,
@@ -405,7 +440,34 @@ impl Controller {
 }
 
 /// A finite state within range and an alpha in [0, 1], or the error naming what is not.
+#[inline(always)]
 fn check_step_inputs(measured: &VehicleState, alpha: f64) -> Result<(), StateError> {
+    // The common case in a few comparisons.
+    let m = measured;
+    let finite = all_finite([m.x_m, m.y_m, m.theta_rad, m.v_mps, m.delta_rad]);
+    let lim = crate::limits::MAX_COORDINATE_M;
+    if finite && m.x_m.abs() <= lim && m.y_m.abs() <= lim && (0.0..=1.0).contains(&alpha) {
+        return Ok(());
+    }
+    check_step_inputs_in_full(measured, alpha)
+}
+
+/// True when every value is finite, in one comparison: `v - v` is 0 for a
+/// finite `v` and NaN otherwise, so the sum is 0 exactly when all are.
+#[inline(always)]
+#[allow(clippy::eq_op)]
+fn all_finite<const N: usize>(values: [f64; N]) -> bool {
+    let mut sum = values[0] - values[0];
+    for v in &values[1..] {
+        sum += v - v;
+    }
+    sum == 0.0
+}
+
+/// [`check_step_inputs`] field by field: the error names the first bad one.
+#[cold]
+#[inline(never)]
+fn check_step_inputs_in_full(measured: &VehicleState, alpha: f64) -> Result<(), StateError> {
     measured.check_finite()?;
     for (name, value) in [("x_m", measured.x_m), ("y_m", measured.y_m)] {
         if value.abs() > crate::limits::MAX_COORDINATE_M {

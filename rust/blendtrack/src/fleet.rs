@@ -35,7 +35,7 @@ use crate::controller::{Controller, Track};
 use crate::error::ConfigError;
 use crate::longitudinal::Obstacle;
 use crate::path::Path;
-use crate::vehicle::{Command, Vehicle, VehicleParams, VehicleState};
+use crate::vehicle::{advance, Command, VehicleParams, VehicleState};
 use std::sync::Arc;
 use thiserror::Error;
 
@@ -747,23 +747,29 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
     } else {
         None
     };
+    // The heading's (cos, sin), for the controller and the integration alike.
+    let h = state.heading_vec();
     let Ok(o) = e
         .controller
-        .step_limited(&state, alpha, &obstacles[..n_obs], limit)
+        .step_limited_along(&state, h, alpha, &obstacles[..n_obs], limit)
     else {
         return Row::default();
     };
     let next = match inp.dt_s {
+        // A vehicle without delay, as Vehicle::step moves it.
         Some(dt) => {
-            let mut veh = Vehicle::new(state, e.params, e.controller.config().direction, 0);
-            veh.step(
+            advance(
+                &state,
+                &e.params,
+                e.controller.config().direction,
                 Command {
                     steering_rad: o.steering_rad,
                     accel_mps2: o.accel_mps2,
                 },
                 dt,
-            );
-            veh.state
+                || (h.y, h.x),
+            )
+            .0
         }
         None => Row::default().next,
     };
@@ -787,7 +793,7 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::vehicle::Direction;
+    use crate::vehicle::{Direction, Vehicle};
 
     fn fleet_with(n: usize) -> (Fleet, Vec<i64>) {
         let mut f = Fleet::new();

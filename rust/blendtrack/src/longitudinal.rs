@@ -265,9 +265,10 @@ struct Border {
     path_length: f64,
     /// +1 for the left border (leaving = crossing it right to left), -1 for the right.
     leaving_sign: f64,
-    /// Bounding box of each run of `BOX_SEGMENTS` segments, so a ray cast can
-    /// skip a run its ray misses with one slab test.
-    boxes: Vec<(Point2<f64>, Point2<f64>)>,
+    /// Per run of `RUN_SEGMENTS` segments, the strip around its chord that
+    /// holds all its vertices ([`Strip`]): a ray whose line passes a strip
+    /// on one side cannot leave through the run.
+    strips: Vec<Strip>,
     /// Per segment, together so a scan reads one record per segment: its
     /// start, its vector and the path arc length at its end.
     segs: Vec<Seg>,
@@ -292,20 +293,43 @@ struct Seg {
     end_s: f64,
 }
 
-/// Segments per bounding box of a border.
-const BOX_SEGMENTS: usize = 8;
+/// The vertices of a run of border segments, as a strip: every vertex lies
+/// within `half_width` of the chord from the run's first vertex to its last
+/// (`p1`). `half_width` includes the margin [`Ray::misses_strip`]
+/// relies on.
+#[derive(Debug, Clone, Copy)]
+struct Strip {
+    /// The chord's end, the run's last vertex (its start, the run's first
+    /// vertex, is the first segment's `a`, and the last run's `p1`).
+    p1: Point2<f64>,
+    half_width: f64,
+    /// The end arc length of the run's last segment (its `end_s`).
+    end_s: f64,
+}
 
-/// A ray `o + t u` with what its box tests need, computed once per ray cast.
+/// The margin (m) added to a strip's half-width for [`Ray::misses_strip`]:
+/// it covers the rounding of the strip test and of the segment test
+/// (coordinates up to [`STRIP_MAX_COORDINATE_M`]: errors of a few 1e-6 m)
+/// and the segment test's `1 + 1e-6` factor (`STRIP_LENGTH_MARGIN` times
+/// the run's longest segment).
+const STRIP_MARGIN_M: f64 = 1e-3;
+const STRIP_LENGTH_MARGIN: f64 = 4e-6;
+/// Beyond this coordinate magnitude (m) of a border vertex or a ray origin
+/// the strip test is not used (the margin above would not cover the
+/// rounding there).
+const STRIP_MAX_COORDINATE_M: f64 = 1e10;
+
+/// Segments per run (strip) of a border.
+const RUN_SEGMENTS: usize = 8;
+
+/// A ray `o + t u` with what its strip tests need, computed once per ray cast.
 struct Ray<'a> {
     o: &'a Point2<f64>,
     u: &'a Vector2<f64>,
-    /// `(1 / u.x, 1 / u.y)`.
-    inv_u: Vector2<f64>,
-    /// Per axis: `|u| < 1e-15` (the slab test of that axis is a range check).
-    flat: [bool; 2],
-    /// `o` and `u` finite: no slab parameter is then NaN, and the box test
-    /// takes its minima and maxima by plain comparisons.
-    finite: bool,
+    /// The strip test applies: `o` within [`crate::limits::MAX_COORDINATE_M`]
+    /// of the origin on each axis (as the controller's states are) and `u`
+    /// a unit vector within 1 %. Otherwise every segment is tested.
+    strips: bool,
 }
 
 impl<'a> Ray<'a> {
@@ -313,85 +337,45 @@ impl<'a> Ray<'a> {
         Ray {
             o,
             u,
-            inv_u: Vector2::new(1.0 / u.x, 1.0 / u.y),
-            flat: [u.x.abs() < 1e-15, u.y.abs() < 1e-15],
-            finite: o.x.is_finite() && o.y.is_finite() && u.x.is_finite() && u.y.is_finite(),
+            strips: o.x.abs() <= crate::limits::MAX_COORDINATE_M
+                && o.y.abs() <= crate::limits::MAX_COORDINATE_M
+                && (0.98..=1.02).contains(&u.norm_squared()),
         }
     }
 
-    /// [`ray_hits_box`]. With `o` and `u` finite each slab parameter is a
-    /// finite coordinate difference times a finite non-zero `1 / u` (an axis
-    /// with `|u| < 1e-15` is tested apart), so never NaN: comparisons then
-    /// pick the same minima and maxima as `f64::min` / `max` (up to the sign
-    /// of a zero, which no comparison sees), and the answer is the same.
-    #[inline]
-    fn hits_box(&self, lo: &Point2<f64>, hi: &Point2<f64>, t_max: f64) -> bool {
-        if !self.finite {
-            return ray_hits_box(self.o, self.u, &self.inv_u, lo, hi, t_max);
-        }
-        let (mut t0, mut t1) = (0.0f64, t_max);
-        self.slab::<0>(lo, hi, &mut t0, &mut t1) && self.slab::<1>(lo, hi, &mut t0, &mut t1)
-    }
-
-    /// One axis of [`Self::hits_box`]: narrows `[t0, t1]`, false once empty.
+    /// `cross(u, p - o)`: the side of the ray's line that `p` is on (> 0
+    /// left), times `|u|` its distance from it.
     #[inline(always)]
-    fn slab<const AXIS: usize>(
-        &self,
-        lo: &Point2<f64>,
-        hi: &Point2<f64>,
-        t0: &mut f64,
-        t1: &mut f64,
-    ) -> bool {
-        let o = self.o[AXIS];
-        if self.flat[AXIS] {
-            return !(o < lo[AXIS] || o > hi[AXIS]);
-        }
-        let inv = self.inv_u[AXIS];
-        let (t_lo, t_hi) = ((lo[AXIS] - o) * inv, (hi[AXIS] - o) * inv);
-        let (ta, tb) = if t_lo < t_hi {
-            (t_lo, t_hi)
-        } else {
-            (t_hi, t_lo)
-        };
-        if ta > *t0 {
-            *t0 = ta;
-        }
-        if tb < *t1 {
-            *t1 = tb;
-        }
-        !(*t0 > *t1)
+    fn side(&self, p: &Point2<f64>) -> f64 {
+        cross(self.u, &(p - self.o))
     }
-}
 
-/// Does the ray `o + t u`, `0 <= t <= t_max`, touch the box `[lo, hi]`?
-/// `inv_u` is `(1 / u.x, 1 / u.y)`, computed once per ray cast.
-#[inline]
-fn ray_hits_box(
-    o: &Point2<f64>,
-    u: &Vector2<f64>,
-    inv_u: &Vector2<f64>,
-    lo: &Point2<f64>,
-    hi: &Point2<f64>,
-    t_max: f64,
-) -> bool {
-    let (mut t0, mut t1) = (0.0f64, t_max);
-    for axis in 0..2 {
-        if u[axis].abs() < 1e-15 {
-            if o[axis] < lo[axis] || o[axis] > hi[axis] {
-                return false;
-            }
-            continue;
-        }
-        let inv = inv_u[axis];
-        let (t_lo, t_hi) = ((lo[axis] - o[axis]) * inv, (hi[axis] - o[axis]) * inv);
-        let (ta, tb) = (t_lo.min(t_hi), t_lo.max(t_hi));
-        t0 = t0.max(ta);
-        t1 = t1.min(tb);
-        if t0 > t1 {
-            return false;
-        }
+    /// True if the ray's line passes a run's [`Strip`] on one side, clear of
+    /// it, given the [`Self::side`]s `s0`, `s1` of the strip's chord ends:
+    /// then every segment of the run fails the exit test
+    /// ([`Border::exit_below`] returns `best` for it, bit for bit).
+    ///
+    /// Why: write `sigma(v)` for `cross(u, v - o)` computed exactly on the
+    /// stored doubles. A vertex within `w` of the chord `[p0, p1]` has a
+    /// `sigma` within `|u| w` (`|u| < 1.01`) of a convex combination of
+    /// `sigma(p0)` and `sigma(p1)`; each computed side is within 1e-4 m of
+    /// its `sigma` (coordinates under [`STRIP_MAX_COORDINATE_M`], `o` under
+    /// 1e9 m: each rounding is below 4e-16 of 3e10 m). So if both computed
+    /// sides are beyond `half_width` on one side, every vertex of the run
+    /// is beyond `STRIP_MARGIN_M + STRIP_LENGTH_MARGIN L - 1e-4` there
+    /// (`L` the run's longest segment). For a segment from `a` to `b`, the
+    /// exit test's `mm` is `leaving_sign sigma(a)` and its `d` is
+    /// `leaving_sign (sigma(a) - sigma(b))`, each within 1e-4 m. With
+    /// `leaving_sign sigma` negative at both ends by that much, `mm` is
+    /// below `-1e-4`, hence below `-(d 1e-100)`: rejected. With it positive
+    /// at both ends, `mm - fl(d (1 + 1e-6))` is at least
+    /// `leaving_sign sigma(b) - 1.1e-6 |b - a| - 3e-4`, positive: rejected
+    /// too. (A NaN side compares false: the run is tested.)
+    #[inline(always)]
+    fn misses_strip(&self, s0: f64, s1: f64, half_width: f64) -> bool {
+        self.strips
+            && ((s0 > half_width && s1 > half_width) || (s0 < -half_width && s1 < -half_width))
     }
-    true
 }
 
 /// Tolerance of the border simplification (m).
@@ -445,6 +429,18 @@ fn simplify(pts: &[Point2<f64>], tol: f64) -> Vec<usize> {
     (0..n).filter(|&i| keep[i]).collect()
 }
 
+/// Distance from `q` to the segment `[a, b]` (to `a` if the two coincide).
+fn distance_to_segment(q: &Point2<f64>, a: &Point2<f64>, b: &Point2<f64>) -> f64 {
+    let e = b - a;
+    let l2 = e.norm_squared();
+    let t = if l2 > 0.0 {
+        (e.dot(&(q - a)) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (q - (a + e * t)).norm()
+}
+
 impl Border {
     fn new(
         full: &[Point2<f64>],
@@ -457,20 +453,35 @@ impl Border {
         let pts: Vec<Point2<f64>> = idx.iter().map(|&i| full[i]).collect();
         let n = pts.len();
         let n_seg = if closed { n } else { n.saturating_sub(1) };
-        let boxes = (0..n_seg)
-            .step_by(BOX_SEGMENTS)
+        let s: Vec<f64> = idx.iter().map(|&i| vertex_s[i]).collect();
+        let far = pts
+            .iter()
+            .any(|p| !(p.x.abs() <= STRIP_MAX_COORDINATE_M && p.y.abs() <= STRIP_MAX_COORDINATE_M));
+        let strips = (0..n_seg)
+            .step_by(RUN_SEGMENTS)
             .map(|start| {
-                let mut lo = pts[start];
-                let mut hi = pts[start];
-                for k in start..(start + BOX_SEGMENTS).min(n_seg) {
+                let end = (start + RUN_SEGMENTS).min(n_seg);
+                let (p0, p1) = (pts[start], pts[end % n]);
+                let mut w: f64 = 0.0;
+                let mut longest: f64 = 0.0;
+                for k in start..end {
                     let q = pts[(k + 1) % n];
-                    lo = Point2::new(lo.x.min(q.x), lo.y.min(q.y));
-                    hi = Point2::new(hi.x.max(q.x), hi.y.max(q.y));
+                    w = w.max(distance_to_segment(&q, &p0, &p1));
+                    longest = longest.max((q - pts[k]).norm());
                 }
-                (lo, hi)
+                // Rounded up generously: the proof needs an upper bound.
+                let half_width = if far {
+                    f64::INFINITY
+                } else {
+                    1.02 * w + STRIP_LENGTH_MARGIN * longest + STRIP_MARGIN_M
+                };
+                Strip {
+                    p1,
+                    half_width,
+                    end_s: if end < n { s[end] } else { path_length },
+                }
             })
             .collect();
-        let s: Vec<f64> = idx.iter().map(|&i| vertex_s[i]).collect();
         let segs = (0..n_seg)
             .map(|k| Seg {
                 a: pts[k],
@@ -499,7 +510,7 @@ impl Border {
             closed,
             path_length,
             leaving_sign,
-            boxes,
+            strips,
             bucket,
             bucket_scale,
         }
@@ -616,14 +627,15 @@ impl Border {
     /// (see [`Corridor::ray_cast`]).
     ///
     /// In effect, from the segment holding `start_s` on (wrapping round on a
-    /// closed border, at most every segment once): at the first segment of
-    /// each full run of `BOX_SEGMENTS`, if the ray misses the run's bounding
-    /// box (up to the best exit so far), only the run's last segment is
-    /// tested; each segment tested updates the best exit with
-    /// [`Self::exit_below`]; after each, the scan stops once the arc length
-    /// from `start_s` to its end exceeds `scan_m` or `2 best + slack_m`.
-    /// The loop goes run by run so that a segment costs its test and one
-    /// comparison.
+    /// closed border, at most every segment once), each segment updates the
+    /// best exit with [`Self::exit_below`]; after each, the scan stops once
+    /// the arc length from `start_s` to its end exceeds `scan_m` or
+    /// `2 best + slack_m`. The loop goes run by run: the segments of a run
+    /// whose strip the ray's line passes clear of ([`Ray::misses_strip`])
+    /// cannot change the best exit, so only the end of the run's last one is
+    /// checked against the stop (within a run the ends grow, so the scan
+    /// stops after the run if and only if it would have stopped within
+    /// it); in the other runs a segment costs its test and one comparison.
     fn first_exit(&self, ray: &Ray, start_s: f64, scan_m: f64, slack_m: f64) -> f64 {
         let (u, o) = (ray.u, ray.o);
         let segs = &self.segs[..];
@@ -642,47 +654,56 @@ impl Border {
             path_length: self.path_length,
         };
         scan.update_stop();
-        let mut visited = 0;
-        while visited < n_seg {
-            let (from, to);
-            if k % BOX_SEGMENTS == 0
-                && k + BOX_SEGMENTS <= n_seg
-                && !ray.hits_box(
-                    &self.boxes[k / BOX_SEGMENTS].0,
-                    &self.boxes[k / BOX_SEGMENTS].1,
-                    scan.best.min(1e12),
-                )
-            {
-                // The ray cannot leave through this run: account for its
-                // length, test its last segment.
-                from = k + BOX_SEGMENTS - 1;
-                to = k + BOX_SEGMENTS;
-                visited += BOX_SEGMENTS;
+        let strips = &self.strips[..];
+        let mut r = k / RUN_SEGMENTS;
+        // The side of the current run's first vertex (the last run's `p1`).
+        let mut s0 = ray.side(&segs[r * RUN_SEGMENTS].a);
+        // Segments not yet visited (each is visited at most once).
+        let mut left = n_seg;
+        loop {
+            let strip = &strips[r];
+            let run_end = ((r + 1) * RUN_SEGMENTS).min(n_seg);
+            let end = run_end.min(k + left);
+            left -= end - k;
+            let s1 = ray.side(&strip.p1);
+            if ray.misses_strip(s0, s1, strip.half_width) {
+                let end_s = if end == run_end {
+                    strip.end_s
+                } else {
+                    segs[end - 1].end_s
+                };
+                let mut scanned = end_s - start_s;
+                if self.closed && scanned < 0.0 {
+                    scanned += self.path_length;
+                }
+                if scanned > scan.stop {
+                    break;
+                }
             } else {
-                // On to the next run's start, at most every segment once.
-                from = k;
-                to = ((k / BOX_SEGMENTS + 1) * BOX_SEGMENTS)
-                    .min(n_seg)
-                    .min(k + (n_seg - visited));
-                visited += to - from;
+                let run = &segs[k..end];
+                // Within a run the end arc lengths grow: if the first is not
+                // behind start_s, none is and no wrap-around correction applies.
+                let stopped = if self.closed && run[0].end_s - start_s < 0.0 {
+                    self.scan_run::<true>(run, &mut scan, u, o)
+                } else {
+                    self.scan_run::<false>(run, &mut scan, u, o)
+                };
+                if stopped {
+                    break;
+                }
             }
-            let run = &segs[from..to];
-            // Within a run the end arc lengths grow: if the first is not
-            // behind start_s, none is and no wrap-around correction applies.
-            let stopped = if self.closed && run[0].end_s - start_s < 0.0 {
-                self.scan_run::<true>(run, &mut scan, u, o)
-            } else {
-                self.scan_run::<false>(run, &mut scan, u, o)
-            };
-            if stopped {
+            if left == 0 {
                 break;
             }
-            k = to;
+            s0 = s1;
+            k = end;
+            r += 1;
             if k >= n_seg {
                 if !self.closed {
                     break;
                 }
                 k = 0;
+                r = 0;
             }
         }
         scan.best
@@ -1268,8 +1289,9 @@ mod tests {
         assert!(hits > 1000 && n > 100 * hits, "{hits} hits of {n}");
     }
 
-    /// [`Border::first_exit`] as a plain loop, one segment at a time: the
-    /// scan's definition, which the run-by-run scan must match bit for bit.
+    /// [`Border::first_exit`] as a plain loop, one segment at a time and
+    /// every segment tested: the scan's definition, which the run-by-run
+    /// scan with its strip tests must match bit for bit.
     fn plain_first_exit(
         b: &Border,
         u: &Vector2<f64>,
@@ -1287,17 +1309,7 @@ mod tests {
                 .saturating_sub(1)
                 .min(n_seg - 1);
         let mut best = f64::INFINITY;
-        let inv_u = Vector2::new(1.0 / u.x, 1.0 / u.y);
-        let mut visited = 0;
-        while visited < n_seg {
-            visited += 1;
-            if k % BOX_SEGMENTS == 0 && k + BOX_SEGMENTS <= n_seg {
-                let (lo, hi) = &b.boxes[k / BOX_SEGMENTS];
-                if !ray_hits_box(o, u, &inv_u, lo, hi, best.min(1e12)) {
-                    k += BOX_SEGMENTS - 1;
-                    visited += BOX_SEGMENTS - 1;
-                }
-            }
+        for _ in 0..n_seg {
             best = best.min(b.exit(k, u, o).unwrap_or(f64::INFINITY));
             let mut scanned = b.segs[k].end_s - start_s;
             if b.closed && scanned < 0.0 {
@@ -1315,6 +1327,68 @@ mod tests {
             }
         }
         best
+    }
+
+    #[test]
+    fn no_segment_of_a_strip_the_ray_passes_clear_of_is_left_through() {
+        // Rays along, across and just beside each run's chord, the line at
+        // the strip's edge and a little beyond: wherever the strip test
+        // says the line passes clear, every segment's exit test fails.
+        let track = Path::test_track(1.0).unwrap();
+        let wiggly: Vec<[f64; 2]> = (0..400)
+            .map(|i| {
+                let x = i as f64 * 0.7;
+                [x, 3.0 * (0.05 * x).sin() + 0.02 * ((i * 7919) % 13) as f64]
+            })
+            .collect();
+        let paths = [
+            track,
+            Path::circle(25.0, 1e-3).unwrap(),
+            Path::new(&wiggly, None, false).unwrap(),
+        ];
+        let (mut culled, mut n) = (0, 0);
+        for path in &paths {
+            let cor = Corridor::new(path, &ControllerConfig::default());
+            for b in [&cor.left_simple, &cor.right_simple] {
+                for (r, strip) in b.strips.iter().enumerate() {
+                    let p0 = b.segs[r * RUN_SEGMENTS].a;
+                    let chord = strip.p1 - p0;
+                    let along = if chord.norm() > 0.0 {
+                        chord / chord.norm()
+                    } else {
+                        Vector2::new(1.0, 0.0)
+                    };
+                    let normal = Vector2::new(-along.y, along.x);
+                    for off in [0.0, 0.999, 1.0, 1.001, 1.5, 3.0] {
+                        for side in [-1.0, 1.0] {
+                            for (turn, back) in [(0.0, 5.0), (0.01, -3.0), (-0.2, 40.0), (1.5, 0.0)]
+                            {
+                                let (c, s) = (f64::cos(turn), f64::sin(turn));
+                                let u = Vector2::new(
+                                    c * along.x - s * along.y,
+                                    s * along.x + c * along.y,
+                                );
+                                let o =
+                                    p0 - along * back + normal * (side * off * strip.half_width);
+                                let ray = Ray::new(&o, &u);
+                                let (s0, s1) = (ray.side(&p0), ray.side(&strip.p1));
+                                if !ray.misses_strip(s0, s1, strip.half_width) {
+                                    continue;
+                                }
+                                culled += 1;
+                                let end = ((r + 1) * RUN_SEGMENTS).min(b.n_segments());
+                                for k in r * RUN_SEGMENTS..end {
+                                    assert_eq!(b.exit(k, &u, &o), None, "run {r} segment {k}");
+                                    assert_eq!(b.exit_below(k, &u, &o, 1e300), 1e300);
+                                    n += 1;
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(culled > 500 && n > 2000, "{culled} strips, {n} segments");
     }
 
     #[test]

@@ -91,6 +91,32 @@ pub fn integrate_pose(
     wheelbase_m: f64,
     dt: f64,
 ) -> (f64, f64, f64) {
+    integrate_pose_with(
+        x,
+        y,
+        theta,
+        || (theta.sin(), theta.cos()),
+        v,
+        delta,
+        wheelbase_m,
+        dt,
+    )
+}
+
+/// [`integrate_pose`] for a caller that has `(theta.sin(), theta.cos())`
+/// already (`sin_cos` gives them, asked only on an arc): the same doubles.
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn integrate_pose_with(
+    x: f64,
+    y: f64,
+    theta: f64,
+    sin_cos: impl FnOnce() -> (f64, f64),
+    v: f64,
+    delta: f64,
+    wheelbase_m: f64,
+    dt: f64,
+) -> (f64, f64, f64) {
     let omega = v * delta.tan() / wheelbase_m;
     let dth = omega * dt;
     if dth.abs() < 1e-9 {
@@ -104,12 +130,68 @@ pub fn integrate_pose(
     } else {
         let r = v / omega;
         let th1 = theta + dth;
+        let (sin_theta, cos_theta) = sin_cos();
         (
-            x + r * (th1.sin() - theta.sin()),
-            y - r * (th1.cos() - theta.cos()),
+            x + r * (th1.sin() - sin_theta),
+            y - r * (th1.cos() - cos_theta),
             wrap_angle(th1),
         )
     }
+}
+
+/// One step of a vehicle without delay (what [`Vehicle::step`] does with
+/// the command it applies): the actuators move toward `cmd` within their
+/// limits, then the pose is integrated. Returns the next state and the
+/// acceleration applied along travel. `sin_cos`: as [`integrate_pose_with`].
+#[inline]
+pub(crate) fn advance(
+    state: &VehicleState,
+    p: &VehicleParams,
+    direction: Direction,
+    cmd: Command,
+    dt: f64,
+    sin_cos: impl FnOnce() -> (f64, f64),
+) -> (VehicleState, f64) {
+    let dmax = p.max_steering_rad();
+    let rate = p.max_steering_rate_rad_s() * dt;
+    let target = if cmd.steering_rad.is_finite() {
+        cmd.steering_rad.clamp(-dmax, dmax)
+    } else {
+        state.delta_rad
+    };
+    let delta =
+        (state.delta_rad + (target - state.delta_rad).clamp(-rate, rate)).clamp(-dmax, dmax);
+    let a = if cmd.accel_mps2.is_finite() {
+        cmd.accel_mps2
+    } else {
+        0.0
+    };
+    let a = a.clamp(p.max_braking_mps2, p.max_acceleration_mps2);
+    let sgn = direction.sign();
+    let v_travel = state.v_mps * sgn;
+    let v_new = (v_travel + a * dt).clamp(0.0, p.max_speed_mps);
+    let applied = (v_new - v_travel) / dt;
+    let v = v_new * sgn;
+    let (x, y, th) = integrate_pose_with(
+        state.x_m,
+        state.y_m,
+        state.theta_rad,
+        sin_cos,
+        v,
+        delta,
+        p.wheelbase_m,
+        dt,
+    );
+    (
+        VehicleState {
+            x_m: x,
+            y_m: y,
+            theta_rad: th,
+            v_mps: v,
+            delta_rad: delta,
+        },
+        applied,
+    )
 }
 
 /// Physical limits of the vehicle and its actuators.
@@ -354,43 +436,12 @@ impl Vehicle {
                 self.delay.pop_front().unwrap_or(cmd)
             }
         };
-        let p = &self.params;
-        let dmax = p.max_steering_rad();
-        let rate = p.max_steering_rate_rad_s() * dt;
-        let target = if cmd.steering_rad.is_finite() {
-            cmd.steering_rad.clamp(-dmax, dmax)
-        } else {
-            self.state.delta_rad
-        };
-        let delta = (self.state.delta_rad + (target - self.state.delta_rad).clamp(-rate, rate))
-            .clamp(-dmax, dmax);
-        let a = if cmd.accel_mps2.is_finite() {
-            cmd.accel_mps2
-        } else {
-            0.0
-        };
-        let a = a.clamp(p.max_braking_mps2, p.max_acceleration_mps2);
-        let sgn = self.direction.sign();
-        let v_travel = self.state.v_mps * sgn;
-        let v_new = (v_travel + a * dt).clamp(0.0, p.max_speed_mps);
-        self.applied_accel_mps2 = (v_new - v_travel) / dt;
-        let v = v_new * sgn;
-        let (x, y, th) = integrate_pose(
-            self.state.x_m,
-            self.state.y_m,
-            self.state.theta_rad,
-            v,
-            delta,
-            p.wheelbase_m,
-            dt,
-        );
-        self.state = VehicleState {
-            x_m: x,
-            y_m: y,
-            theta_rad: th,
-            v_mps: v,
-            delta_rad: delta,
-        };
+        let theta = self.state.theta_rad;
+        let (state, applied) = advance(&self.state, &self.params, self.direction, cmd, dt, || {
+            (theta.sin(), theta.cos())
+        });
+        self.state = state;
+        self.applied_accel_mps2 = applied;
     }
 }
 
