@@ -255,6 +255,24 @@ def test_the_scenarios_own_junction_check_is_not_overridden(net: Path, tmp_path:
     assert "--collision.check-junctions" not in cmd, cmd
 
 
+@pytest.mark.parametrize("junctions", [False, True])
+def test_the_plain_run_of_a_compare_checks_junctions_as_the_treatment_does(net: Path, tmp_path: Path, junctions: bool) -> None:
+    """Both runs of a pair count collisions the same way: the baseline's
+    command line takes the junction check exactly where the treatment's does."""
+    from blendtrack.sumo.compare.runs import baseline_command
+
+    sc = _scenario(net, tmp_path / "sc", CROSSING, junctions=junctions)
+    treatment = SumoRun(sc, RunOptions(controlled_ids=("c",), end_s=1, progress=False), tmp_path / "o").conn.command()
+    for args in ((), ("--collision.check-junctions", "false")):
+        base = baseline_command(sc, 0, 1.0, tmp_path / "b", args)
+        flag = [base[i + 1] for i, a in enumerate(base) if a == "--collision.check-junctions"]
+        if args:
+            assert flag == ["false"], base
+        else:
+            assert flag == ([] if junctions else ["true"]), base
+            assert ("--collision.check-junctions" in treatment) == (not junctions)
+
+
 def test_emergency_brakings_are_counted_by_sumos_rule(net: Path, tmp_path: Path) -> None:
     """Under collision.action none the controlled "c" brakes as hard as it
     can once "b" stands on its nose: SUMO warns of emergency braking (decel

@@ -160,13 +160,7 @@ class SumoConnection:
                 ]
         if self.opt.end_s is not None:
             cmd += ["--end", str(self.opt.end_s)]
-        if self.scenario.config().option("collision.check-junctions") is None:
-            # SUMO checks for collisions along lanes only unless told to look
-            # inside junctions too (by overlap of the vehicles' shapes); off,
-            # a controlled vehicle that ran into another in a junction went
-            # uncounted (Bologna, 600 s, seeds 0-2: 12 such collisions).
-            # The scenario's own setting, or --sumo-args, wins.
-            cmd += ["--collision.check-junctions", "true"]
+        cmd += junction_check_args(self.scenario)
         # SUMO refuses an option given twice: the user's replace ours.
         return cmd[:3] + override_options(cmd[3:], list(self.opt.sumo_args))
 
@@ -387,6 +381,18 @@ class _OnLane(dict[str, Any]):
     def __missing__(self, lane: str) -> Any:
         ids = self[lane] = self._conn.lane_vehicles(lane)
         return ids
+
+
+def junction_check_args(scenario: Scenario) -> list[str]:
+    """``--collision.check-junctions true`` unless the scenario's configuration
+    sets it: SUMO checks for collisions along lanes only unless told to look
+    inside junctions too (by overlap of the vehicles' shapes); off, a
+    controlled vehicle that ran into another in a junction went uncounted
+    (Bologna, 600 s, seeds 0-2: 12 such collisions). Both runs of a compare
+    take it; the user's --sumo-args replace it (``override_options``)."""
+    if scenario.config().option("collision.check-junctions") is not None:
+        return []
+    return ["--collision.check-junctions", "true"]
 
 
 def override_options(base: list[str], extra: list[str]) -> list[str]:

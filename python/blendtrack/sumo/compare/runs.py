@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from blendtrack.sumo.connection import override_options, sumo_binary
+from blendtrack.sumo.connection import junction_check_args, override_options, sumo_binary
 from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 from blendtrack.sumo.selection import CONTROLLED_PARAM, unit_hash
@@ -99,6 +99,16 @@ def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path, 
     ``out/sumo``) and the user's extra SUMO options, which replace ours."""
     sd = out / "sumo"
     sd.mkdir(parents=True, exist_ok=True)
+    cmd = baseline_command(scenario, seed, end_s, sd, sumo_args)
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    if proc.returncode != 0:
+        lines = [ln.strip() for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
+        errors = [ln for ln in lines if "Error" in ln] or lines or [f"exit code {proc.returncode}"]
+        raise ScenarioError(f"{scenario.sumocfg}: SUMO refused to start: {errors[0]}")
+
+
+def baseline_command(scenario: Scenario, seed: int, end_s: float | None, sd: Path, sumo_args: Sequence[str] = ()) -> list[str]:
+    """The baseline's ``sumo`` command line, its outputs under ``sd``."""
     cmd = [sumo_binary(False), "-c", str(scenario.run_config(sd)), "--seed", str(seed),
            "--no-step-log", "true", "--duration-log.disable", "true",
            "--tripinfo-output", str(sd / "tripinfo.xml"), "--device.emissions.probability", "1",
@@ -109,12 +119,8 @@ def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path, 
            *_output_args(sd)]
     if end_s is not None:
         cmd += ["--end", str(end_s)]
-    cmd = cmd[:3] + override_options(cmd[3:], list(sumo_args))
-    proc = subprocess.run(cmd, capture_output=True, text=True)
-    if proc.returncode != 0:
-        lines = [ln.strip() for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
-        errors = [ln for ln in lines if "Error" in ln] or lines or [f"exit code {proc.returncode}"]
-        raise ScenarioError(f"{scenario.sumocfg}: SUMO refused to start: {errors[0]}")
+    cmd += junction_check_args(scenario)
+    return cmd[:3] + override_options(cmd[3:], list(sumo_args))
 
 
 def run_treatment(scenario: Scenario, options: RunOptions, out: Path) -> Any:
