@@ -17,7 +17,7 @@ import traci.constants as tc
 
 from blendtrack.sumo import junctions as jn
 from blendtrack.sumo import lanechange as lc
-from blendtrack.sumo.junctions import Junctions
+from blendtrack.sumo.junctions import FOLLOW_MIN_SPEED_MPS, Junctions
 from blendtrack.sumo.lanechange import COURTESY_DECEL_MPS2, COURTESY_SPACE_M, LaneChanges
 
 EPS = 1e-6
@@ -693,7 +693,9 @@ def test_junction_blocked_by_a_body_within_the_half_width() -> None:
     conn.lanes[":j_0"] = ["me", "o"]
     path = np.array([[0.0, 0.0], [20.0, 0.0]])
     origin = {"in_0": "a_0", ":j_0": "b_0"}
-    network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]), from_lane=lambda lane: origin.get(lane))
+    exits: list[str] = []
+    network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]), from_lane=lambda lane: origin.get(lane),
+                              junction_exits=lambda via: tuple(exits))
     j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
     assert j.junction_blocked("me", "in_0") and j.counts["inside_junction_waits"] == 1
     v.cars["o"]["xy"] = (10.0, 7.3 + 1e-3)
@@ -704,14 +706,25 @@ def test_junction_blocked_by_a_body_within_the_half_width() -> None:
     network.junction_lanes = lambda via: (path, [])
     v.cars["o"]["xy"] = (10.0, 0.0)
     assert not j.junction_blocked("me", "in_0")
+    # On a lane out of the junction (SUMO lists it there by its front): in
+    # the way only while its back is still inside (lane position under its
+    # 5 m length).
+    network.junction_lanes = lambda via: (path, [":j_0"])
+    conn.lanes[":j_0"] = ["me"]
+    conn.lanes["out_0"] = ["o"]
+    exits.append("out_0")
+    v.cars["o"].update(xy=(10.0, 3.0), pos=5.0 - 1e-3)
+    assert j.junction_blocked("me", "in_0")
+    v.cars["o"].update(pos=5.0)
+    assert not j.junction_blocked("me", "in_0")
 
 
 def test_a_vehicle_ahead_from_the_same_lane_is_followed_not_waited_for() -> None:
     """A vehicle inside the junction in the path that entered from the same
     lane (a left turner ahead of a straight-on vehicle) blocks only while
-    it stands (below 0.1 m/s) or its back is not yet past the line (lane
-    position below its 5 m length); from another lane it blocks whatever it
-    does."""
+    it is slow (below FOLLOW_MIN_SPEED_MPS, or slower than the vehicle
+    behind) or its back is not yet past the line (lane position below its
+    5 m length); from another lane it blocks whatever it does."""
     import numpy as np
 
     conn = FakeConn()
@@ -721,13 +734,19 @@ def test_a_vehicle_ahead_from_the_same_lane_is_followed_not_waited_for() -> None
     conn.lanes[":j_0"] = ["o"]
     path = np.array([[0.0, 0.0], [20.0, 0.0]])
     origin = {"in_0": "a_0", ":j_0": "a_0"}
-    network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]), from_lane=lambda lane: origin.get(lane))
+    network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]), from_lane=lambda lane: origin.get(lane),
+                              junction_exits=lambda via: ())
     j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
     assert not j.junction_blocked("me", "in_0")
-    for speed, pos in [(0.1 - 1e-3, 5.0), (3.0, 5.0 - 1e-3)]:
+    for speed, pos in [(FOLLOW_MIN_SPEED_MPS - 1e-3, 5.0), (3.0, 5.0 - 1e-3)]:
         v.cars["o"].update(speed=speed, pos=pos)
         assert j.junction_blocked("me", "in_0"), (speed, pos)
-    v.cars["o"].update(speed=0.1, pos=5.0)
+    v.cars["o"].update(speed=FOLLOW_MIN_SPEED_MPS, pos=5.0)
+    assert not j.junction_blocked("me", "in_0")
+    # Slower than the vehicle behind it: waited for.
+    v.cars["me"].update(speed=FOLLOW_MIN_SPEED_MPS + 1.0)
+    assert j.junction_blocked("me", "in_0")
+    v.cars["o"].update(speed=FOLLOW_MIN_SPEED_MPS + 1.0)
     assert not j.junction_blocked("me", "in_0")
     origin[":j_0"] = "c_0"
     assert j.junction_blocked("me", "in_0")
