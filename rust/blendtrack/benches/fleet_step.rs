@@ -8,35 +8,22 @@
 //! splits the step over rayon's global pool (one thread per core, as the
 //! Python module does), `threads_1` stays on the calling thread.
 
-use blendtrack::{ControllerConfig, Fleet, FleetInputs, Path};
+use blendtrack::FleetInputs;
 use criterion::{criterion_group, criterion_main, Criterion};
 use std::hint::black_box;
 use std::time::Duration;
 
+#[path = "common/fleet_setup.rs"]
+mod fleet_setup;
+
 const VEHICLES: usize = 10_000;
 
 fn bench(c: &mut Criterion) {
-    let path = Path::test_track(1.0).expect("built-in track");
     let mut g = c.benchmark_group("fleet_step");
     g.sample_size(30).measurement_time(Duration::from_secs(5));
     for (name, threads) in [("threads_default", 0), ("threads_1", 1)] {
-        let mut fleet = Fleet::new();
-        fleet.set_threads(threads);
-        let track = fleet
-            .add_track(path.clone(), ControllerConfig::default())
-            .unwrap() as i64;
-        let slots: Vec<i64> = (0..VEHICLES)
-            .map(|_| fleet.add_vehicle(track, None, None).unwrap() as i64)
-            .collect();
-        let (mut x, mut y, mut theta) = (vec![], vec![], vec![]);
-        for i in 0..VEHICLES {
-            let s = path.length() * i as f64 / VEHICLES as f64;
-            let (p, h) = (path.point_at(s), path.heading_at(s));
-            x.push(p.x - 0.3 * h.sin());
-            y.push(p.y + 0.3 * h.cos());
-            theta.push(h);
-        }
-        let (mut v, mut delta) = (vec![3.0; VEHICLES], vec![0.0; VEHICLES]);
+        let (mut fleet, slots, (mut x, mut y, mut theta, mut v, mut delta)) =
+            fleet_setup::test_track_fleet(VEHICLES, threads);
         g.bench_function(name, |b| {
             b.iter(|| {
                 let mut inp = FleetInputs::new(&slots, &x, &y, &theta, &v, &delta);

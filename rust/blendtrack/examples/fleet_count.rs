@@ -14,30 +14,17 @@
 //! dt 0.1 s, each step's next state fed back. It prints a hash of every
 //! output's bits (equal before and after a change meant only for speed).
 
-use blendtrack::{ControllerConfig, Fleet, FleetInputs, Path};
+use blendtrack::FleetInputs;
+
+#[path = "../benches/common/fleet_setup.rs"]
+mod fleet_setup;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let n: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(10_000);
     let steps: usize = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(5);
-    let path = Path::test_track(1.0).expect("built-in track");
-    let mut fleet = Fleet::new();
-    fleet.set_threads(1);
-    let track = fleet
-        .add_track(path.clone(), ControllerConfig::default())
-        .expect("track") as i64;
-    let slots: Vec<i64> = (0..n)
-        .map(|_| fleet.add_vehicle(track, None, None).expect("vehicle") as i64)
-        .collect();
-    let (mut x, mut y, mut theta) = (vec![], vec![], vec![]);
-    for i in 0..n {
-        let s = path.length() * i as f64 / n as f64;
-        let (p, h) = (path.point_at(s), path.heading_at(s));
-        x.push(p.x - 0.3 * h.sin());
-        y.push(p.y + 0.3 * h.cos());
-        theta.push(h);
-    }
-    let (mut v, mut delta) = (vec![3.0; n], vec![0.0; n]);
+    let (mut fleet, slots, (mut x, mut y, mut theta, mut v, mut delta)) =
+        fleet_setup::test_track_fleet(n, 1);
     let mut hash: u64 = 0;
     let mut mix = |col: &[f64]| {
         for v in col {
