@@ -30,13 +30,7 @@ fn bench(c: &mut Criterion) {
                 inp.dt_s = Some(0.1);
                 let out = fleet.step(black_box(&inp)).unwrap();
                 let next = out.next.expect("dt given");
-                (x, y, theta, v, delta) = (
-                    next.x_m,
-                    next.y_m,
-                    next.theta_rad,
-                    next.v_mps,
-                    next.delta_rad,
-                );
+                (x, y, theta, v, delta) = fleet_setup::columns(next);
                 black_box(out.steering_rad)
             })
         });

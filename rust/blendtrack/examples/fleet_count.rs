@@ -70,13 +70,7 @@ fn main() {
             eprintln!("fleet_count: a vehicle's step failed");
             std::process::exit(2);
         }
-        (x, y, theta, v, delta) = (
-            next.x_m,
-            next.y_m,
-            next.theta_rad,
-            next.v_mps,
-            next.delta_rad,
-        );
+        (x, y, theta, v, delta) = fleet_setup::columns(next);
     }
     println!("{n} vehicles, {steps} steps, output hash {hash:016x}");
 }

@@ -2,7 +2,7 @@
 //! `n` vehicles spread evenly over the built-in test track, 0.3 m left of
 //! it, at 3 m/s, default configuration.
 
-use blendtrack::{ControllerConfig, Fleet, Path};
+use blendtrack::{ControllerConfig, Fleet, NextStates, Path};
 
 /// The fleet's vehicles' state columns (x, y, theta, v, delta).
 pub type Columns = (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>);
@@ -28,4 +28,15 @@ pub fn test_track_fleet(n: usize, threads: usize) -> (Fleet, Vec<i64>, Columns) 
         theta.push(h);
     }
     (fleet, slots, (x, y, theta, vec![3.0; n], vec![0.0; n]))
+}
+
+/// A step's next states as the next step's input columns.
+pub fn columns(next: NextStates) -> Columns {
+    (
+        next.x_m,
+        next.y_m,
+        next.theta_rad,
+        next.v_mps,
+        next.delta_rad,
+    )
 }
