@@ -5,6 +5,7 @@ output."""
 from __future__ import annotations
 
 import math
+from array import array
 from collections.abc import Container
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,19 +38,25 @@ class Track:
 
 
 def read_fcd(file: Path) -> dict[str, Track]:
-    """Every vehicle's series in an FCD file (``--fcd-output``)."""
+    """Every vehicle's series in an FCD file (``--fcd-output``).
+
+    Samples go straight into a flat array of doubles per vehicle (8 bytes a
+    value) and each lane name is kept once: held as a tuple of Python floats
+    per sample and a string per sample, the FCD of Bologna run to its end
+    (1.1 GB) took the compare process to about 8 GB."""
     import sumolib
 
-    raw: dict[str, tuple[str, list[tuple[float, float, float, float, float, float]], list[str]]] = {}
+    raw: dict[str, tuple[str, array[float], list[str]]] = {}
+    lane_names: dict[str, str] = {}
     for step, veh in sumolib.xml.parse_fast_nested(str(file), "timestep", ["time"], "vehicle", _FCD_ATTRS):
         rec = raw.get(veh.id)
         if rec is None:
-            rec = raw[veh.id] = (veh.type, [], [])
-        rec[1].append((float(step.time), float(veh.x), float(veh.y), float(veh.angle), float(veh.speed), float(veh.pos)))
-        rec[2].append(veh.lane)
+            rec = raw[veh.id] = (veh.type, array("d"), [])
+        rec[1].extend((float(step.time), float(veh.x), float(veh.y), float(veh.angle), float(veh.speed), float(veh.pos)))
+        rec[2].append(lane_names.setdefault(veh.lane, veh.lane))
     out = {}
-    for vid, (vtype, rows, lanes) in raw.items():
-        a = np.array(rows, dtype=float)
+    for vid, (vtype, flat, lanes) in raw.items():
+        a = np.frombuffer(flat, dtype=float).reshape(-1, 6)
         out[vid] = Track(vtype, a[:, 0], a[:, 1], a[:, 2], a[:, 3], a[:, 4], lanes, a[:, 5])
     return out
 
