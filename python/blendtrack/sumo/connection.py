@@ -10,6 +10,7 @@ import hashlib
 import math
 import os
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Callable
 
@@ -141,28 +142,10 @@ class SumoConnection:
         of the configuration (``Scenario.run_config``): the scenario's inputs
         by absolute path and every output it configures under the run's
         folder, so nothing is written into the scenario's folder."""
-        cfg = self.scenario.run_config(self._sumo_dir())
-        cmd = [sumo_binary(self.opt.gui), "-c", str(cfg), "--seed", str(self.opt.seed)]
-        cmd += ["--no-step-log", "true", "--duration-log.disable", "true"]
-        if self.out_dir is not None:
-            sd = self.out_dir / "sumo"
-            sd.mkdir(parents=True, exist_ok=True)
-            cmd += ["--tripinfo-output", str(sd / "tripinfo.xml"), "--device.emissions.probability", "1"]
-            cmd += ["--collision-output", str(sd / "collisions.xml"), "--log", str(sd / "sumo.log")]
-            if self.opt.fcd:
-                cmd += ["--fcd-output", str(sd / "fcd.xml")]
-            if self.opt.ssm:
-                cmd += [
-                    "--device.ssm.probability", "1",
-                    "--device.ssm.file", str(sd / "ssm.xml"),
-                    "--device.ssm.measures", "TTC DRAC PET",
-                    "--device.ssm.thresholds", "3.0 3.0 2.0",
-                ]
-        if self.opt.end_s is not None:
-            cmd += ["--end", str(self.opt.end_s)]
-        cmd += junction_check_args(self.scenario)
-        # SUMO refuses an option given twice: the user's replace ours.
-        return cmd[:3] + override_options(cmd[3:], list(self.opt.sumo_args))
+        o = self.opt
+        outputs = self.out_dir / "sumo" if self.out_dir is not None else None
+        return sumo_command(self.scenario, self._sumo_dir(), o.seed, o.end_s, outputs,
+                            gui=o.gui, fcd=o.fcd, ssm=o.ssm, sumo_args=o.sumo_args)
 
     def start(self) -> None:
         global _LIBSUMO_STARTED
@@ -381,6 +364,38 @@ class _OnLane(dict[str, Any]):
     def __missing__(self, lane: str) -> Any:
         ids = self[lane] = self._conn.lane_vehicles(lane)
         return ids
+
+
+def sumo_command(scenario: Scenario, config_dir: Path, seed: int, end_s: float | None, outputs: Path | None, *,
+                 gui: bool = False, fcd: bool = False, ssm: bool = False, ours: Sequence[str] = (),
+                 sumo_args: Sequence[str] = ()) -> list[str]:
+    """A ``sumo`` command line of a run, the blendtrack run's and the plain
+    baseline's alike: the scenario's run configuration written under
+    ``config_dir``; SUMO's outputs (trip info, collisions, log, and the FCD
+    and SSM device when asked) under ``outputs`` (none without it); ``ours``,
+    further options of the caller; the end time; the junction collision
+    check; then the user's ``sumo_args``, which replace any of ours they name
+    (SUMO refuses an option given twice)."""
+    cmd = [sumo_binary(gui), "-c", str(scenario.run_config(config_dir)), "--seed", str(seed)]
+    cmd += ["--no-step-log", "true", "--duration-log.disable", "true"]
+    if outputs is not None:
+        outputs.mkdir(parents=True, exist_ok=True)
+        cmd += ["--tripinfo-output", str(outputs / "tripinfo.xml"), "--device.emissions.probability", "1"]
+        cmd += ["--collision-output", str(outputs / "collisions.xml"), "--log", str(outputs / "sumo.log")]
+        if fcd:
+            cmd += ["--fcd-output", str(outputs / "fcd.xml")]
+        if ssm:
+            cmd += [
+                "--device.ssm.probability", "1",
+                "--device.ssm.file", str(outputs / "ssm.xml"),
+                "--device.ssm.measures", "TTC DRAC PET",
+                "--device.ssm.thresholds", "3.0 3.0 2.0",
+            ]
+    cmd += list(ours)
+    if end_s is not None:
+        cmd += ["--end", str(end_s)]
+    cmd += junction_check_args(scenario)
+    return cmd[:3] + override_options(cmd[3:], list(sumo_args))
 
 
 def junction_check_args(scenario: Scenario) -> list[str]:

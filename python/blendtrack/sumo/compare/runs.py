@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from blendtrack.sumo.connection import junction_check_args, override_options, sumo_binary
+from blendtrack.sumo.connection import sumo_command
 from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 from blendtrack.sumo.selection import CONTROLLED_PARAM, unit_hash
@@ -108,19 +108,9 @@ def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path, 
 
 
 def baseline_command(scenario: Scenario, seed: int, end_s: float | None, sd: Path, sumo_args: Sequence[str] = ()) -> list[str]:
-    """The baseline's ``sumo`` command line, its outputs under ``sd``."""
-    cmd = [sumo_binary(False), "-c", str(scenario.run_config(sd)), "--seed", str(seed),
-           "--no-step-log", "true", "--duration-log.disable", "true",
-           "--tripinfo-output", str(sd / "tripinfo.xml"), "--device.emissions.probability", "1",
-           "--collision-output", str(sd / "collisions.xml"), "--log", str(sd / "sumo.log"),
-           "--fcd-output", str(sd / "fcd.xml"),
-           "--device.ssm.probability", "1", "--device.ssm.file", str(sd / "ssm.xml"),
-           "--device.ssm.measures", "TTC DRAC PET", "--device.ssm.thresholds", "3.0 3.0 2.0",
-           *_output_args(sd)]
-    if end_s is not None:
-        cmd += ["--end", str(end_s)]
-    cmd += junction_check_args(scenario)
-    return cmd[:3] + override_options(cmd[3:], list(sumo_args))
+    """The baseline's ``sumo`` command line, its outputs under ``sd``: the
+    runner's (``connection.sumo_command``) with the FCD and SSM device."""
+    return sumo_command(scenario, sd, seed, end_s, sd, fcd=True, ssm=True, ours=_output_args(sd), sumo_args=sumo_args)
 
 
 def run_treatment(scenario: Scenario, options: RunOptions, out: Path) -> Any:
