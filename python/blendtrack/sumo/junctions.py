@@ -6,6 +6,7 @@ traffic lights' states passed on to the RouteFleet."""
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 import numpy as np
@@ -322,8 +323,25 @@ class Junctions:
         if not lanes:
             return False
         veh = self.conn.sumo.vehicle
-        get_speed, get_pos, vehicles_on = self.conn.get_speed, self.conn.get_lane_pos, self.conn.vehicles_on
         reach = 0.5 * float(veh.getWidth(vid)) + INSIDE_MARGIN_M
+        for other in self._inside_junction(vid, via, lanes):
+            body, half = body_segment(veh, other)
+            if segments_distance(body, path) < reach + half:
+                self.counts["inside_junction_waits"] += 1
+                return True
+        return False
+
+    def _inside_junction(self, vid: str, via: str, lanes: Sequence[str]) -> Iterator[str]:
+        """The vehicles other than ``vid`` with a body in the junction on the
+        junction ``lanes`` near ``via``'s way, lazily (``junction_blocked``
+        stops at the first in the way), less those to follow."""
+        veh = self.conn.sumo.vehicle
+        get_speed, get_pos, vehicles_on = self.conn.get_speed, self.conn.get_lane_pos, self.conn.vehicles_on
+
+        def back_out(other: str) -> bool:
+            """Is the back of ``other`` past the start of its lane?"""
+            return float(get_pos(other)) >= float(veh.getLength(other))
+
         origin = self.network.from_lane(via)
         from_lane = self.network.from_lane
         follow_speed = None
@@ -338,15 +356,12 @@ class Junctions:
             for other in on:
                 if other == vid:
                     continue
-                if same and float(get_pos(other)) >= float(veh.getLength(other)):
+                if same and back_out(other):
                     if follow_speed is None:
                         follow_speed = max(FOLLOW_MIN_SPEED_MPS, float(get_speed(vid)))
                     if float(get_speed(other)) >= follow_speed:
                         continue
-                body, half = body_segment(veh, other)
-                if segments_distance(body, path) < reach + half:
-                    self.counts["inside_junction_waits"] += 1
-                    return True
+                yield other
         # A vehicle that has left the junction by another way with its back
         # still in it (standing just past the exit, say): SUMO lists it on
         # the lane out only. Not checked, a controlled vehicle swept through
@@ -354,13 +369,8 @@ class Junctions:
         # branch of a lane that fans out (Bologna, 8).
         for lane in self.network.junction_exits(via):
             for other in vehicles_on(lane):
-                if other == vid or float(get_pos(other)) >= float(veh.getLength(other)):
-                    continue
-                body, half = body_segment(veh, other)
-                if segments_distance(body, path) < reach + half:
-                    self.counts["inside_junction_waits"] += 1
-                    return True
-        return False
+                if other != vid and not back_out(other):
+                    yield other
 
     def _held_at_line(self, other: str) -> bool:
         """Is ``other`` (standing) held at its stop line: a controlled
