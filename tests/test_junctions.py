@@ -418,3 +418,67 @@ def test_a_vehicle_on_the_other_branch_of_a_fanout_is_not_run_into(tmp_path: Pat
     assert _arrived(run) == 1 and s["controlled_vehicles"] == 1
     lanes = [lane for _, lane, _, _ in watch.rows["c"]]
     assert "JB_1" in lanes and "JB_0" not in lanes, lanes
+
+
+def _long_junction(tmp: Path) -> Path:
+    """Road ``AJ`` goes straight on through junction ``J``, drawn 30 m long
+    (a junction lane of about 30 m), onto ``JB``; a minor road ``SJ``-``JN``
+    crosses it (no traffic: its lanes make the junction lane one SUMO checks
+    for junction collisions at every stage); SUMO's ``v`` drives ahead
+    of ``f``, 20 m apart, both at 10 m/s (their top speed), 0.1 s steps."""
+    tmp.mkdir(parents=True, exist_ok=True)
+    (tmp / "n.nod.xml").write_text('<nodes><node id="A" x="0" y="0"/>'
+                                   '<node id="J" x="200" y="0" type="priority" shape="185,-6 215,-6 215,6 185,6"/>'
+                                   '<node id="B" x="400" y="0"/><node id="S" x="200" y="-200"/><node id="N" x="200" y="200"/></nodes>\n')
+    (tmp / "n.edg.xml").write_text(f'<edges><edge id="AJ" from="A" to="J" numLanes="1" speed="{SPEED}" priority="3"/>'
+                                   f'<edge id="JB" from="J" to="B" numLanes="1" speed="{SPEED}" priority="3"/>'
+                                   f'<edge id="SJ" from="S" to="J" numLanes="1" speed="{SPEED}" priority="1"/>'
+                                   f'<edge id="JN" from="J" to="N" numLanes="1" speed="{SPEED}" priority="1"/></edges>\n')
+    proc = subprocess.run([_netconvert(), "-n", str(tmp / "n.nod.xml"), "-e", str(tmp / "n.edg.xml"),
+                           "-o", str(tmp / "n.net.xml"), "--no-turnarounds", "true"], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    (tmp / "r.rou.xml").write_text(
+        '<routes><vType id="bg" sigma="0" length="5" maxSpeed="10"/><route id="r" edges="AJ JB"/>'
+        '<vehicle id="v" type="bg" route="r" depart="0" departPos="150" departSpeed="10"/>'
+        '<vehicle id="f" type="bg" route="r" depart="0" departPos="130" departSpeed="10"/></routes>\n')
+    cfg = tmp / "run.sumocfg"
+    cfg.write_text('<configuration><input><net-file value="n.net.xml"/><route-files value="r.rou.xml"/></input>'
+                   '<time><end value="60"/><step-length value="0.1"/></time></configuration>\n')
+    return cfg
+
+
+@pytest.mark.parametrize("move", ["moveTo", "moveToXY"])
+def test_sumo_keeps_a_vehicle_moved_by_lane_position_on_the_lane_it_lapped_onto(tmp_path: Path, move: str) -> None:
+    """Why blendtrack places a vehicle whose back SUMO still has on the lane
+    before by (x, y): SUMO's ``moveTo`` onto the lane the vehicle is on only
+    sets its position, and the junction lane behind keeps it as an occupant
+    placed where its front is on the new lane; the vehicle behind on the
+    junction lane, 10 m back in fact, is then called a collision. The same
+    point given by ``moveToXY`` is not. (If SUMO mends ``moveTo``, the first
+    case fails and the cheaper move can come back: RouteFleet's
+    ``laps_back_onto_the_lane_before``.)"""
+    cfg = _long_junction(tmp_path / "net")
+    done: list[tuple[str, float]] = []
+
+    def hook(run: SumoRun, t: float) -> None:
+        v = run.sumo.vehicle
+        if done or "v" not in v.getIDList() or "f" not in v.getIDList():
+            return
+        if v.getLaneID("v") == "JB_0" and 0.5 <= v.getLanePosition("v") < 4.0 and v.getLaneID("f").startswith(":J"):
+            done.append((v.getLaneID("f"), float(v.getLanePosition("v"))))
+            target = 5.0 + 0.3
+            if move == "moveTo":
+                v.moveTo("v", "JB_0", target)
+            else:
+                x, y = run.sumo.simulation.convert2D("JB", target)
+                v.moveToXY("v", "JB", 0, x, y, v.getAngle("v"), 2)
+
+    run = SumoRun(resolve_scenario(cfg), RunOptions(seed=0, progress=False, controlled_fraction=0.0), tmp_path / "o")
+    run.step_hooks.append(hook)
+    run.run()
+    assert done, "the set-up never had v just onto JB with f in the junction"
+    rows = read_collisions(tmp_path / "o" / "sumo" / "collisions.xml", set())
+    if move == "moveTo":
+        assert len(rows) == 1 and rows[0]["lane"] == done[0][0], rows
+    else:
+        assert rows == [], rows

@@ -181,7 +181,7 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
             _ => f64::INFINITY,
         };
         glide_move(d, &mut p, expect, (dist, room), cross, dt_s)
-    } else if on_lane && p.pos >= d.body.length_m {
+    } else if on_lane && p.pos >= d.body.length_m && !laps_back_onto_the_lane_before(d, k) {
         if let Some((lane, known)) = d.known {
             if lane == piece.lane {
                 p.pos = p.pos.max(known);
@@ -193,6 +193,23 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
         Move::Xy
     };
     p
+}
+
+/// Whether the simulator has the vehicle on the lane of piece `k` with its
+/// back still over the lane's start, on the route's lane before (SUMO calls
+/// it a partial occupant there). A lane-position move on the same lane then leaves that lane
+/// believing the vehicle is still on it: SUMO's `moveTo` onto the lane a
+/// vehicle is already on only sets its position (libsumo's
+/// `Vehicle::moveTo` calls `setTentativeLaneAndPosition` and returns),
+/// so the lane before keeps it as a partial occupant whose position there
+/// SUMO can no longer work out, and takes its position on its own lane
+/// instead. SUMO's next collision check put a controlled vehicle 5 m into
+/// the junction lane behind it, behind the follower there, 14 m back, and
+/// called that a collision (Bologna, :23_3_0); the follower's leader
+/// search saw it behind. A move by (x, y) goes through SUMO's remote
+/// control, which updates the lanes the vehicle laps onto.
+fn laps_back_onto_the_lane_before(d: &Driven, k: usize) -> bool {
+    k > 0 && matches!(d.known, Some((l, at)) if l == d.route.pieces[k].lane && at < d.body.length_m)
 }
 
 /// The front's speed in the simulator's lane coordinates over a step that
@@ -333,6 +350,28 @@ mod tests {
         let out = f.step(&[], DT).unwrap();
         assert_eq!(out.moves, [Move::Lane]);
         assert!((out.lane_pos_m[0] + out.v_mps[0] * DT - f.s_front(a).unwrap()).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_vehicle_whose_back_the_simulator_has_on_the_lane_before_is_placed_by_xy() {
+        // Lane 12 starts at arc length 210 (after junction lane 11). The
+        // simulator lags 3 m behind on lane 12: no speed move makes that
+        // up, the vehicle is placed. With the simulator's front 3 m into
+        // lane 12 (its back, 4.5 m behind, on lane 11) it goes by (x, y),
+        // which has SUMO update the lanes it laps onto; with the back on
+        // lane 12 too, by lane position.
+        for (x, behind_front, want) in [(212.0, 3.0, Move::Xy), (222.0, 9.0, Move::Lane)] {
+            let (mut f, t) = fleet_on(road(None, true));
+            let a = f
+                .add_vehicle(t, None, None, body(), at(x, 10.0), None)
+                .unwrap() as i64;
+            let sf = f.s_front(a).unwrap();
+            let on_12 = (sf - 210.0) * 1.01;
+            assert!(on_12 - behind_front > 2.0, "lagging: {on_12} vs {behind_front}");
+            plan_one(&mut f, a, (f64::NAN, f64::NAN), (12, behind_front));
+            let out = f.step(&[], DT).unwrap();
+            assert_eq!(out.moves, [want], "front at {behind_front} on lane 12");
+        }
     }
 
     #[test]
