@@ -367,7 +367,10 @@ mod tests {
                 .unwrap() as i64;
             let sf = f.s_front(a).unwrap();
             let on_12 = (sf - 210.0) * 1.01;
-            assert!(on_12 - behind_front > 2.0, "lagging: {on_12} vs {behind_front}");
+            assert!(
+                on_12 - behind_front > 2.0,
+                "lagging: {on_12} vs {behind_front}"
+            );
             plan_one(&mut f, a, (f64::NAN, f64::NAN), (12, behind_front));
             let out = f.step(&[], DT).unwrap();
             assert_eq!(out.moves, [want], "front at {behind_front} on lane 12");
