@@ -966,6 +966,71 @@ def test_a_leader_past_a_fan_out_on_the_tracks_way_is_taken() -> None:
     assert j.leader_at_fanout("me", "in_1", ["elsewhere"], ("far", 40.0)) == ("far", 40.0)
 
 
+def _merge_junctions(conn: FakeConn) -> Junctions:
+    """Lane "maj" (50 m) leads through ":m_0_0" (6 m) and lane "min" (40 m)
+    through ":m_1_0" (8 m) onto "out" (100 m): two ways merging."""
+    after = {":m_0_0": [(":m_0_0", 6.0), ("out", 100.0)], ":m_1_0": [(":m_1_0", 8.0), ("out", 100.0)]}
+    ways = {"out": [((":m_0_0", 6.0),), ((":m_1_0", 8.0),)]}
+    lengths = {"maj": 50.0, "min": 40.0}
+    net = SimpleNamespace(lanes_after=lambda via: after.get(via, []), ways_into=lambda lane: ways.get(lane, []),
+                          lane_length=lengths.__getitem__)
+    return Junctions(conn, net, None, None, 4.0)  # type: ignore[arg-type]
+
+
+def test_a_vehicle_merging_from_another_junction_lane_is_followed_when_it_gets_there_first() -> None:
+    """The merge point is the start of "out". "me" on ":m_0_0" at 2 m is
+    6 - 2 = 4 m from it; "foe" on ":m_1_0" at 5 m is 8 - 5 = 3 m from it,
+    nearer: its back will be 4 - 3 - 5 = -4 m ahead, the gap as getLeader
+    gives it -4 - minGap 2.5 = -6.5 m (stop at once). Farther from the
+    merge point, the foe is followed only while it gets there sooner at the
+    speeds both have now; standing, or slower, it is not (it follows)."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane=":m_0_0", pos=2.0, speed=1.0, min_gap=2.5)
+    v.add("foe", lane=":m_1_0", pos=5.0, speed=0.5, length=5.0)
+    conn.lanes = {":m_1_0": ["foe"]}
+    j = _merge_junctions(conn)
+    track = ["maj", ":m_0_0", "out"]
+    assert j.leader_at_merge("me", ":m_0_0", track, None) == ("foe", pytest.approx(4.0 - 3.0 - 5.0 - 2.5))
+    assert j.leader_at_merge("me", ":m_0_0", track, ("far", 30.0)) == ("foe", pytest.approx(-6.5))
+    # A leader of its own nearer than the foe's back stays.
+    assert j.leader_at_merge("me", ":m_0_0", track, ("close", -8.0)) == ("close", -8.0)
+    # Nor does a standing one that the foe, nearer by gap but at 10 m/s,
+    # would hide: stop points -6.5 + 10^2 / (2 x 4) = 6 m against 3 m.
+    v.add("stand", speed=0.0)
+    v.cars["foe"]["speed"] = 10.0
+    assert j.leader_at_merge("me", ":m_0_0", track, ("stand", 3.0)) == ("stand", 3.0)
+    assert j.leader_at_merge("me", ":m_0_0", track, ("stand", 7.0)) == ("foe", pytest.approx(-6.5))
+    v.cars["foe"]["speed"] = 0.5
+    # The foe 6 m from the merge point (at 2 m), "me" 4 m: only sooner counts.
+    v.cars["foe"]["pos"] = 2.0
+    # 6 m at 0.5 m/s (12 s) against 4 m at 1 m/s (4 s): "me" goes first.
+    assert j.leader_at_merge("me", ":m_0_0", track, None) is None
+    # 6 m at 2 m/s (3 s) against 4 s: the foe first; gap 4 - 6 - 5 - 2.5.
+    v.cars["foe"]["speed"] = 2.0
+    assert j.leader_at_merge("me", ":m_0_0", track, None) == ("foe", pytest.approx(-9.5))
+    # Exactly as soon (6 m at 1.5 m/s): not sooner, not followed.
+    v.cars["foe"]["speed"] = 1.5
+    assert j.leader_at_merge("me", ":m_0_0", track, None) is None
+    # "me" standing: a moving foe gets there first; a standing one does not.
+    v.cars["me"]["speed"] = 0.0
+    assert j.leader_at_merge("me", ":m_0_0", track, None) == ("foe", pytest.approx(-9.5))
+    v.cars["foe"]["speed"] = 0.0
+    assert j.leader_at_merge("me", ":m_0_0", track, None) is None
+    # From the lane before: "maj" at 30 m is 20 + 6 = 26 m from the merge
+    # point; the foe (standing 6 m from it) is nearer: gap 26 - 6 - 5 - 2.5.
+    v.cars["me"].update(lane="maj", pos=30.0)
+    assert j.leader_at_merge("me", "maj", track, None) == ("foe", pytest.approx(12.5))
+    # Farther than MERGE_LOOKAHEAD_M (30 m) from the merge point: not looked at.
+    v.cars["me"]["pos"] = 10.0
+    assert j.leader_at_merge("me", "maj", track, ("x", 50.0)) == ("x", 50.0)
+    # A way that does not merge, and a vehicle on its own way, are not looked at.
+    v.cars["me"]["pos"] = 30.0
+    assert j.leader_at_merge("me", "maj", ["maj", ":k_0_0", "x"], None) is None
+    conn.lanes = {":m_0_0": ["foe"]}
+    assert j.leader_at_merge("me", "maj", track, None) is None
+
+
 def test_the_network_lists_the_lanes_that_fan_out(tmp_path: Path) -> None:
     """A one-lane edge into a two-lane one: netconvert connects the lane to
     both, so it fans out; the two-lane edge into a one-lane one does not
@@ -985,6 +1050,33 @@ def test_the_network_lists_the_lanes_that_fan_out(tmp_path: Path) -> None:
     vias, length = fan["one_0"]
     assert len(vias) == 2 and all(v.startswith(":b_") for v in vias)
     assert length == pytest.approx(Network(tmp_path / "n.net.xml").net().getLane("one_0").getLength())
+    # Ways merging: the lanes of "two" are each reached from "one_0" alone,
+    # and "last_0" from "two" alone (the lane that ends has no connection).
+    net = Network(tmp_path / "n.net.xml")
+    assert net.ways_into("two_0") == [] and net.ways_into("two_1") == [] and net.ways_into("last_0") == []
+
+
+def test_the_network_lists_the_ways_that_merge(tmp_path: Path) -> None:
+    """Edges "main" and "side" both lead onto the one lane of "out" at
+    junction m: two ways (one junction lane each) merge onto "out_0"."""
+    from blendtrack.sumo.connection import sumo_binary
+    from blendtrack.sumo.network import Network
+
+    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="m" x="100" y="0"/>'
+                                        '<node id="s" x="50" y="-60"/><node id="d" x="200" y="0"/></nodes>')
+    (tmp_path / "n.edg.xml").write_text('<edges><edge id="main" from="a" to="m" priority="3"/><edge id="side" from="s" to="m" priority="1"/>'
+                                        '<edge id="out" from="m" to="d" priority="3"/></edges>')
+    netconvert = Path(sumo_binary()).with_name("netconvert")
+    subprocess.run([str(netconvert), "-n", str(tmp_path / "n.nod.xml"), "-e", str(tmp_path / "n.edg.xml"),
+                    "-o", str(tmp_path / "n.net.xml"), "--no-turnarounds", "true"], check=True, capture_output=True)
+    net = Network(tmp_path / "n.net.xml")
+    ways = net.ways_into("out_0")
+    froms = sorted(str(net.from_lane(w[0][0])) for w in ways)
+    assert froms == ["main_0", "side_0"], ways
+    for way in ways:
+        assert all(name.startswith(":m_") and length == pytest.approx(net.lane_length(name)) for name, length in way)
+        assert net.lanes_after(way[0][0])[-1][0] == "out_0"
+    assert net.ways_into("main_0") == []
 
 
 def test_a_leader_counts_when_the_vehicle_is_on_an_edge_without_the_target_lane() -> None:

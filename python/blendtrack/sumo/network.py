@@ -48,6 +48,8 @@ class Network:
         #: every call).
         self._link_indices: dict[str, dict[Any, int]] = {}
         self._fanouts: dict[str, tuple[tuple[str, ...], float]] | None = None
+        self._into: dict[str, list[tuple[tuple[str, float], ...]]] | None = None
+        self._lengths: dict[str, float] = {}
 
     def net(self) -> Any:
         """The sumolib network."""
@@ -100,6 +102,31 @@ class Network:
                     if vias:
                         self._fanouts[ln.getID()] = (vias, float(ln.getLength()))
         return self._fanouts
+
+    def ways_into(self, lane: str) -> list[tuple[tuple[str, float], ...]]:
+        """The ways through junctions onto ``lane`` (a normal lane): for
+        each connection to it, its junction lanes with their lengths, in
+        order; [] when fewer than two lead there (no merge)."""
+        if self._into is None:
+            net = self.net()
+            into: dict[str, list[tuple[tuple[str, float], ...]]] = {}
+            for edge in net.getEdges():
+                if edge.getFunction() == "internal":
+                    continue
+                for ln in edge.getLanes():
+                    for c in ln.getOutgoing():
+                        chain = tuple((part.getID(), float(part.getLength())) for part in _via_chain(net, c))
+                        if chain:
+                            into.setdefault(c.getToLane().getID(), []).append(chain)
+            self._into = {k: v for k, v in into.items() if len(v) > 1}
+        return self._into.get(lane, [])
+
+    def lane_length(self, lane: str) -> float:
+        """The length of ``lane`` (m)."""
+        hit = self._lengths.get(lane)
+        if hit is None:
+            hit = self._lengths[lane] = float(self.net().getLane(lane).getLength())
+        return hit
 
     def is_zipper(self, via: str) -> bool:
         """Is ``via`` a junction lane of a zipper link (state Z)?"""

@@ -457,6 +457,7 @@ class SumoRun:
                 leaders[k] = junctions.leader_beyond(ids[i], order[i].geo.piece_lane, lane)
             else:
                 leaders[k] = junctions.leader_on_track(ids[i], order[i].geo.piece_lane, leaders[k], lane)
+            leaders[k] = junctions.leader_at_merge(ids[i], lane, order[i].geo.piece_lane, leaders[k])
         return ask, self.sumo_leaders.correct(leaders)
 
     # ------------------------------------------------------------------ apply
