@@ -41,7 +41,8 @@ ADDITIONAL = """<additional>
   <parkingArea id="pa" lane="BC_1" startPos="100" endPos="140" roadsideCapacity="3"/>
 </additional>"""
 # "bus": the bus stop (10 s), a lane stop (5 s) and one until t = 90 s.
-# "car": no stops. "odd": a stop on the lane beside its track (skipped).
+# "car": no stops. "odd": a stop on the lane beside its track (it changes
+# lanes to serve it). "near": one on the lane beside, too close to reach (skipped).
 # "park": a parking area (8 s). "trig": a stop waiting for a person who never comes.
 ROUTES = """<routes>
   <vType id="bus" vClass="bus" length="12" minGap="3" accel="2.6" decel="4.5" sigma="0"/>
@@ -64,6 +65,10 @@ ROUTES = """<routes>
   <vehicle id="{prefix}trig" type="car" depart="20" departLane="1" departSpeed="max">
     <route edges="AB BC"/>
     <stop lane="AB_1" endPos="250" triggered="person" duration="3"/>
+  </vehicle>
+  <vehicle id="{prefix}near" type="car" depart="30" departLane="1" departSpeed="max">
+    <route edges="AB BC"/>
+    <stop lane="AB_0" endPos="15" duration="5"/>
   </vehicle>
 </routes>"""
 
@@ -138,23 +143,37 @@ def test_a_controlled_bus_serves_its_stops_where_and_as_long_as_sumo_says(runs: 
     assert (bus["stops_served"], bus["stops_skipped"], bus["end_reason"]) == ("3", "0", "arrived")
     assert int(bus["collisions"]) == 0 and int(bus["teleports"]) == 0
     summary = json.loads((ctrl / "summary.json").read_text())
-    assert summary["stops_served"] == 3 + 1 and summary["stops_skipped"] == 1
+    assert summary["stops_served"] == 3 + 1 + 1 and summary["stops_skipped"] == 1 and summary["stop_lane_changes"] == 1
     assert summary["collisions"] == 0
+
+
+def test_a_stop_on_the_lane_beside_is_reached_by_a_lane_change(runs: tuple[Path, Path]) -> None:
+    """"odd" keeps lane 1 where the route needs no change; its stop is on
+    lane 0 of the same edge: on that edge it changes lanes towards the stop,
+    as SUMO's own driver does, and serves it where SUMO's driver does."""
+    ctrl, plain = runs
+    odd = _vehicles(ctrl)["odd"]
+    assert (odd["stops_served"], odd["stops_skipped"], odd["end_reason"]) == ("1", "0", "arrived")
+    mine, sumos = _stopinfos(ctrl / "stopout.xml")["odd"], _stopinfos(plain / "stopout.xml")["odd"]
+    assert [s["lane"] for s in mine] == [s["lane"] for s in sumos] == ["AB_0"]
+    assert 200.0 - LANE_STOP_TOL_M <= float(mine[0]["pos"]) <= 200.0 + PAST_END_M
+    assert abs(float(mine[0]["ended"]) - float(mine[0]["started"]) - 5.0) <= DT
+    assert int(odd["collisions"]) == 0
 
 
 def test_a_stop_off_the_track_is_skipped_and_does_not_hold_the_vehicle(runs: tuple[Path, Path]) -> None:
     ctrl, plain = runs
-    odd = _vehicles(ctrl)["odd"]
-    # Its track keeps lane 1 (it changes lanes only where the route needs
-    # it): the stop on lane 0 is skipped and removed from SUMO's schedule,
-    # so SUMO neither serves it nor holds the vehicle at the lane's end.
-    assert (odd["stops_served"], odd["stops_skipped"], odd["stop_skip_reasons"]) == ("0", "1", "off_track")
-    assert odd["end_reason"] == "arrived"
-    assert "odd" not in _stopinfos(ctrl / "stopout.xml")
-    assert "odd" in _stopinfos(plain / "stopout.xml"), "SUMO's own driver changes lanes and stops"
+    near = _vehicles(ctrl)["near"]
+    # Its stop, on lane 0, ends 15 m into the edge it departs on lane 1:
+    # no room to change lanes before it. It is skipped and removed from
+    # SUMO's schedule, so SUMO neither serves it nor holds the vehicle at
+    # the lane's end.
+    assert (near["stops_served"], near["stops_skipped"], near["stop_skip_reasons"]) == ("0", "1", "off_track")
+    assert near["end_reason"] == "arrived"
+    assert "near" not in _stopinfos(ctrl / "stopout.xml")
     # Through at free speed: 600 m at the 13.89 m/s limit (a vehicle held at
     # the end of lane AB for a stop would take far longer).
-    assert float(odd["travel_time_s"]) < 600.0 / 13.89 + 5.0
+    assert float(near["travel_time_s"]) < 600.0 / 13.89 + 5.0
 
 
 def test_a_vehicle_without_stops_is_never_looked_at_again(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -253,3 +272,38 @@ def test_a_bus_dwelling_short_of_the_stop_end_stands_where_sumo_holds_it(tmp_pat
     recs = {r.vid: r for r in result.records}
     assert {k: recs[k].collisions for k in recs} == {"first": 0, "second": 0, "car": 0}
     assert (recs["second"].stops_served, recs["second"].reason) == (1, "arrived")
+
+
+def test_a_stop_just_past_a_junction_is_reached_by_the_connection_onto_its_lane(tmp_path: Path) -> None:
+    """One lane ("AB") widens to two ("BC") at junction B, both lanes of BC
+    reached from AB_0. "x0" stops 15 m into BC_0, "x1" 15 m into BC_1: no
+    room to change lanes on BC first, so each track must take the connection
+    onto its stop's lane at B (without that, the track takes one of the two
+    connections for both, and the other vehicle's stop was skipped)."""
+    folder = tmp_path / "sc"
+    folder.mkdir()
+    (folder / "n.nod.xml").write_text('<nodes><node id="A" x="0" y="0"/><node id="B" x="200" y="0"/>'
+                                      '<node id="C" x="400" y="0"/></nodes>')
+    (folder / "n.edg.xml").write_text('<edges><edge id="AB" from="A" to="B" numLanes="1" speed="13.89"/>'
+                                      '<edge id="BC" from="B" to="C" numLanes="2" speed="13.89"/></edges>')
+    netconvert = Path(sumo_binary()).with_name("netconvert")
+    subprocess.run([str(netconvert), "-n", "n.nod.xml", "-e", "n.edg.xml", "-o", "n.net.xml", "--no-turnarounds"],
+                   cwd=folder, check=True, capture_output=True)
+    (folder / "r.rou.xml").write_text(
+        '<routes><vType id="car" length="5" minGap="2.5" accel="2.6" decel="4.5" sigma="0"/>'
+        '<vehicle id="x0" type="car" depart="0" departSpeed="max"><route edges="AB BC"/><stop lane="BC_0" endPos="15" duration="3"/></vehicle>'
+        '<vehicle id="x1" type="car" depart="10" departSpeed="max"><route edges="AB BC"/><stop lane="BC_1" endPos="15" duration="3"/></vehicle>'
+        '</routes>')
+    cfg = folder / "s.sumocfg"
+    cfg.write_text('<configuration><input><net-file value="n.net.xml"/><route-files value="r.rou.xml"/></input>'
+                   f'<time><step-length value="{DT}"/></time></configuration>')
+    out = tmp_path / "out"
+    out.mkdir()
+    stop_out = out / "stopout.xml"
+    sumo.run_scenario(sumo.resolve_scenario(str(cfg)), RunOptions(end_s=120, progress=False, controlled_fraction=1.0,
+                                                                  sumo_args=("--stop-output", str(stop_out))), out)
+    rows = _vehicles(out)
+    for vid, lane in (("x0", "BC_0"), ("x1", "BC_1")):
+        assert (rows[vid]["stops_served"], rows[vid]["stops_skipped"], rows[vid]["end_reason"]) == ("1", "0", "arrived"), rows[vid]
+        (st,) = _stopinfos(stop_out)[vid]
+        assert st["lane"] == lane and 15.0 - LANE_STOP_TOL_M <= float(st["pos"]) <= 15.0 + PAST_END_M

@@ -62,7 +62,7 @@ def test_shared_tracks_nobody_drives_are_bounded() -> None:
     assert tracks.geometry((edges[0],), 0)[1] == driven, "the driven track is kept"
     assert tracks.geometry((edges[-1],), 0)[1] == built[edges[-1]], "the last one left is kept"
     # A route evicted long ago is built again, on a reused id.
-    assert ((edges[1],), 0) not in tracks.geo_cache
+    assert ((edges[1],), 0, ()) not in tracks.geo_cache
     tracks.geometry((edges[1],), 0)
     assert fleet.track_capacity <= IDLE_TRACKS + 2
     slot = fleet.add_vehicle(driven, None, None, reach_m=3.5, length_m=4.5, min_gap_m=2.5, x=float(x), y=float(y),
@@ -87,10 +87,10 @@ def test_idle_shared_tracks_expire_after_idle_track_s() -> None:
     tracks.expire(10.0 + IDLE_TRACK_S)
     assert fleet.n_tracks == 3, "idle for exactly IDLE_TRACK_S: still kept"
     tracks.expire(10.0 + IDLE_TRACK_S + 1.0)
-    assert ((edges[0],), 0) not in tracks.geo_cache and fleet.n_tracks == 2
+    assert ((edges[0],), 0, ()) not in tracks.geo_cache and fleet.n_tracks == 2
     tracks.expire(10.0 * IDLE_TRACK_S)
     # The later idle one goes too; the driven one stays however long it is driven.
-    assert list(tracks.geo_cache) == [((edges[2],), 0)] and fleet.n_tracks == 1
+    assert list(tracks.geo_cache) == [((edges[2],), 0, ())] and fleet.n_tracks == 1
     assert tracks.geometry((edges[2],), 0)[1] == driven
     # Left at 10 IDLE_TRACK_S, it goes IDLE_TRACK_S later.
     tracks.leave(driven)

@@ -265,6 +265,7 @@ def _pieces(
     spacing_m: float,
     defer_changes: bool = False,
     change: tuple[float, float] | tuple[float, float, int] | None = None,
+    prefer: dict[int, int] | None = None,
 ) -> tuple[list[_Piece], tuple[int, int] | None, bool]:
     """Lane pieces along the route: normal lanes, junction lanes, and lane
     changes within an edge where the current lane does not continue.
@@ -280,6 +281,12 @@ def _pieces(
     length, target lane index) is a
     change the route does not need (to overtake, to keep right): onto that
     lane of the first edge, which must go on along the route.
+    ``prefer`` (edge index -> lane index, not the first edge): a lane the
+    track must be on at that edge (a stop's), where the rest of the route
+    can be driven from it and the edge before connects onto it: the route
+    then goes on to that edge only onto that lane, and the track gets there
+    as it does wherever a lane does not go on (connections first, then a
+    lane change).
     """
     objs = []
     for eid in edges:
@@ -290,18 +297,38 @@ def _pieces(
 
     revisits = len(set(edges)) < len(edges)
 
+    # Edge index -> the lane of ``prefer`` taken there: the only lane the
+    # route goes on to on that edge (filled backwards, below).
+    taken: dict[int, str] = {}
+
     def conns_to(lane: Any, k: int) -> list[Any]:
         if k >= len(objs):
             return []
-        return [c for c in lane.getOutgoing() if c.getTo() is objs[k]]
+        cs = [c for c in lane.getOutgoing() if c.getTo() is objs[k]]
+        only = taken.get(k)
+        return [c for c in cs if c.getToLane().getID() == only] if only is not None else cs
+
+    def preferred(k: int, lanes: set[str]) -> set[str]:
+        # The lane ``prefer`` asks for on edge k, when the rest of the route
+        # can be driven from it without a change and the edge before has a
+        # connection onto it: from then on the route goes on only there.
+        want = prefer.get(k) if prefer else None
+        if want is None or k == 0 or not 0 <= want < objs[k].getLaneNumber():
+            return lanes
+        lane_id = objs[k].getLane(want).getID()
+        if lane_id not in lanes or not any(c.getToLane().getID() == lane_id for ln in objs[k - 1].getLanes() for c in conns_to(ln, k)):
+            return lanes
+        taken[k] = lane_id
+        return {lane_id}
 
     # Lanes from which the rest of the route needs no lane change (backwards).
     no_change: list[set[str]] = [set() for _ in objs]
-    no_change[-1] = {ln.getID() for ln in objs[-1].getLanes()}
+    no_change[-1] = preferred(len(objs) - 1, {ln.getID() for ln in objs[-1].getLanes()})
     for k in range(len(objs) - 2, -1, -1):
         for ln in objs[k].getLanes():
             if any(c.getToLane().getID() in no_change[k + 1] for c in conns_to(ln, k + 1)):
                 no_change[k].add(ln.getID())
+        no_change[k] = preferred(k, no_change[k])
 
     def piece(lane: Any) -> _Piece:
         return _lane_piece(lane, spacing_m)
@@ -438,6 +465,7 @@ def route_geometry(
     change: tuple[float, float] | tuple[float, float, int] | None = None,
     border_margin_m: float = 0.0,
     carriageway: bool = False,
+    prefer: dict[int, int] | None = None,
 ) -> RouteGeometry:
     """Builds the reference track of a vehicle on ``edges`` starting in lane ``start_lane_index``.
 
@@ -452,12 +480,13 @@ def route_geometry(
     widths (the virtual borders) are each lane's half width plus
     ``border_margin_m``; with ``carriageway`` a normal lane's are the
     distances to the edges of its whole edge (junction lanes keep their half
-    width; a lane change's are the carriageway's anyway).
+    width; a lane change's are the carriageway's anyway). ``prefer``: lanes
+    to take where the route allows (see ``_pieces``).
     Raises :class:`blendtrack.PathError` for an empty or undrivable route.
     """
     if len(edges) == 0:
         raise PathError("the route has no edges")
-    pieces, pending, early = _pieces(net, edges, start_lane_index, spacing_m, defer_changes, change)
+    pieces, pending, early = _pieces(net, edges, start_lane_index, spacing_m, defer_changes, change, prefer)
     # Joined and smoothed in Rust: the pieces end to end (sharing a point
     # where one starts at the last one's end), the Gaussian smoothing, and
     # each piece cut where the track comes near its lane's centreline or

@@ -571,9 +571,13 @@ class LaneChanges:
                     self.try_tactical_change(act, direction)
                     break
 
-    def try_tactical_change(self, act: Active, direction: int) -> None:
+    def try_tactical_change(self, act: Active, direction: int, for_stop: bool = False) -> bool:
         """Changes ``act`` one lane over (+1 left, -1 right) on its edge, if
-        the target lane goes on along the route and has room now."""
+        the target lane goes on along the route and has room now; True when
+        the change began. ``for_stop``: towards the lane of the vehicle's next
+        stop (``Stops``), counted there, and made also where SUMO inserts
+        vehicles just behind (a bus stop near the start of an edge where
+        vehicles depart could otherwise never be reached)."""
         v = self.conn.sumo.vehicle
         try:
             lane_id = v.getLaneID(act.vid)
@@ -582,42 +586,44 @@ class LaneChanges:
             base = max(int(v.getRouteIndex(act.vid)), 0)
             rest = tuple(v.getRoute(act.vid))[base:]
         except Exception:
-            return
+            return False
         geo = act.geo
         edge, _, index = lane_id.rpartition("_")
         if speed < TACTICAL_MIN_SPEED_MPS or lane_id.startswith(":") or not index.isdigit():
-            return
+            return False
         k = len(geo.edges) - len(rest)
         if not rest or k < 0 or geo.edges[k:] != rest or rest[0] != edge:
-            return  # the track is not of the route from here (a rebuild is due)
+            return False  # the track is not of the route from here (a rebuild is due)
         if geo.pending_change is not None and geo.pending_change[0] == k:
-            return  # the route needs a change on this edge: that one first
-        if pos < self._insertions.get(edge, -math.inf) + TACTICAL_INSERTION_CLEAR_M:
-            return  # SUMO inserts vehicles just behind here (see TACTICAL_INSERTION_CLEAR_M)
+            return False  # the route needs a change on this edge: that one first
+        if not for_stop and pos < self._insertions.get(edge, -math.inf) + TACTICAL_INSERTION_CLEAR_M:
+            return False  # SUMO inserts vehicles just behind here (see TACTICAL_INSERTION_CLEAR_M)
         current = int(index)
         target = current + direction
         lane = self.network.net().getLane(lane_id)
         if not 0 <= target < lane.getEdge().getLaneNumber():
-            return
+            return False
         length = change_length(speed, float(lane.getLength()) - pos - 1.0)
         if length < 8.0:
-            return
+            return False
         # Both checks of the target lane on one reading of it.
         near = self.target_lane_neighbours(act.vid, direction)
         if not self.target_lane_clear(act.vid, direction, speed, length / speed, near):
-            return
+            return False
         far = target + direction
         if not self.tactical_room(act.vid, direction, speed, 1.0, near) or self.changing_into(edge, target, act.vid):
-            return
+            return False
         if 0 <= far < lane.getEdge().getLaneNumber() and not self.far_lane_room(act.vid, f"{edge}_{far}", pos, speed):
-            return
+            return False
         try:
             geo2, track = self.tracks.geometry(rest, current, change=(pos, length, target))
         except blendtrack.PathError:
-            return  # the target lane does not go on along the route
+            return False  # the target lane does not go on along the route
         self.begin_change(act, geo2, track, base, direction, target, (pos, length))
         act.tactical = True
-        self.counts["tactical_lane_changes"] += 1
+        if not for_stop:
+            self.counts["tactical_lane_changes"] += 1
+        return True
 
     def changing_into(self, edge: str, target: int, vid: str) -> bool:
         """Is another controlled vehicle changing onto lane ``target`` of

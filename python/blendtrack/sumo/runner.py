@@ -130,7 +130,7 @@ class SumoRun:
                                    float(base_config.preferred_acceleration), controlled=self.active)
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel,
                                  float(base_config.preferred_acceleration), open_gaps=options.open_gaps)
-        self.stops = Stops(self.conn, self.fleet, self.network, self.tracks.lanes)
+        self.stops = Stops(self.conn, self.fleet, self.network, self.tracks.lanes, self.lanes)
         obs_decel = base_config.max_obs_deceleration if "max_obs_deceleration" in options.fixed_keys else base_config.max_deceleration
         self.sumo_leaders = SumoLeaders(self.conn, self.active, max(abs(float(obs_decel)), 0.5))
         self.zippers = Zippers(self.conn, self.network, self.tracks, self.active)

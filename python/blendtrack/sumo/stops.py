@@ -28,8 +28,15 @@ A stop the vehicle cannot serve is skipped, counted with its reason, and
 removed from SUMO's schedule (``replaceStop`` with an empty edge), so that
 SUMO does not hold the vehicle for it at the end of a lane:
 
-- ``off_track``: the stop's lane is not on the vehicle's track ahead (another
-  lane of the edge: blendtrack changes lanes only where the route needs it);
+- ``off_track``: the stop's lane is not on the vehicle's track ahead and can
+  no longer be reached. A stop on another lane of an edge of the route is
+  reached the way SUMO's drivers reach it: from an earlier edge the vehicle
+  is put on a track that needs the stop's lane there (``_take_lane``);
+  once on the stop's edge on another lane it changes lanes towards it, one
+  lane at a time, whenever the lane beside has room
+  (``LaneChanges.try_tactical_change``; the change's track then holds the
+  stop), until its front is within ``STOP_LANE_ROOM_M`` of the stop's end;
+  then the stop is skipped (and so is one SUMO drops meanwhile);
 - ``passed``: the front is already past the stop (taken over beyond it);
 - ``not_started``: the vehicle stood at the halt for ``START_WAIT_STEPS``
   steps and SUMO did not start the stop.
@@ -57,7 +64,7 @@ from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.geometry import RouteGeometry
 from blendtrack.sumo.network import Network
-from blendtrack.sumo.tracks import Active, Interned
+from blendtrack.sumo.tracks import SHARE_AFTER_M, Active, Interned
 
 #: The halt is placed this far (m) before the stop's end position: the
 #: stopping law's last creep carries the front 0.155 to 0.207 m past its
@@ -78,6 +85,10 @@ PASSED_M = 1.0
 START_WAIT_STEPS = 5
 AT_HALT_M = 0.5
 STANDING_MPS = 0.1
+#: A vehicle on the edge of its next stop but on another lane changes
+#: towards the stop's lane while its front is more than this (m) before the
+#: stop's end (room for the change, 8 m at least, and to stop after it).
+STOP_LANE_ROOM_M = 20.0
 
 
 def stop_key(st: Any) -> tuple[str, float, str]:
@@ -104,20 +115,33 @@ class _Pending:
     dwelling: bool = False
     #: Steps stood at the halt without SUMO starting the stop.
     waited: int = 0
+    #: The stop (SUMO's data) a lane change towards its lane was begun for:
+    #: SUMO drops a vehicle's next stop when the vehicle is put onto the
+    #: stop's lane from another (by ``moveToXY`` or ``moveTo``; SUMO 1.28
+    #: warns "skips stop"), so it is given back (``_restore``).
+    restore: Any = None
+    #: The track built to take the next stop's lane (``_take_lane``), with
+    #: that lane's edge and index, once built.
+    preferred: Any = None
+    #: The next stop is off the track but its lane can still be reached.
+    reaching: bool = False
 
 
 class Stops:
     """The stops of the controlled vehicles that have any."""
 
-    def __init__(self, conn: SumoConnection, fleet: RouteFleet, network: Network, lanes: Interned) -> None:
+    def __init__(self, conn: SumoConnection, fleet: RouteFleet, network: Network, lanes: Interned,
+                 lane_changes: Any = None) -> None:
         self.conn = conn
         self.fleet = fleet
         self.network = network
         #: The lane ids of the RouteFleet's tracks.
         self.lanes = lanes
+        #: The runner's ``LaneChanges``: changes towards a stop's lane (None: none are made).
+        self.lane_changes = lane_changes
         #: vid -> its next stop, for the vehicles with stops left.
         self.pending: dict[str, _Pending] = {}
-        self.counts = {"stops_served": 0, "stops_skipped": 0}
+        self.counts = {"stops_served": 0, "stops_skipped": 0, "stop_lane_changes": 0}
         #: SUMO's ``isStopped`` answers of this step (``dwelling`` asks
         #: before the placement check, ``update`` reuses them later in the
         #: same step: no SUMO step in between).
@@ -189,6 +213,8 @@ class Stops:
                 p.dwelling = True
             return
         nxt = v.getStops(vid, 1)
+        if p.restore is not None and (not nxt or stop_key(nxt[0]) != stop_key(p.restore)):
+            nxt = self._restore(vid, p)
         if not nxt:
             self._clear(p)
             del self.pending[vid]
@@ -196,8 +222,9 @@ class Stops:
         st = nxt[0]
         key = stop_key(st)
         if p.key is not None and key != p.key:
-            # SUMO dropped the stop blendtrack was halting for (a teleport skips it).
-            self._skipped(p, "sumo")
+            # SUMO dropped the stop blendtrack was halting for (a teleport
+            # skips it), or the one whose lane it was still making for.
+            self._skipped(p, "off_track" if p.reaching else "sumo")
         # A new stop, or a new track (a retrack clears the halt: a lane
         # change, a reroute): the halt is placed (again).
         if key != p.key or p.geo is not p.act.geo or math.isnan(self.fleet.halt(p.act.slot)):
@@ -217,10 +244,90 @@ class Stops:
         if s is None:
             # Off the track ahead, or behind the front.
             behind = self.fleet.arc_at_lane_position(slot, lane, pos, -math.inf)
+            if behind is None and self._towards_lane(vid, p, st):
+                # Still reachable: followed, so that SUMO dropping it (the
+                # vehicle went past on another lane) counts.
+                p.key, p.geo, p.reaching = key, p.act.geo, True
+                return
             self._skip(vid, p, "passed" if behind is not None else "off_track")
             return
         self.fleet.set_halt(slot, s)
-        p.key, p.geo, p.waited = key, p.act.geo, 0
+        p.key, p.geo, p.waited, p.reaching = key, p.act.geo, 0, False
+
+    def _restore(self, vid: str, p: _Pending) -> Any:
+        """Gives SUMO back the stop ``p.restore`` as the vehicle's next one;
+        its stops as SUMO then has them (none when SUMO refuses: the stop
+        counts as skipped by SUMO)."""
+        st, p.restore = p.restore, None
+        v = self.conn.sumo.vehicle
+        edge, _, index = str(st.lane).rpartition("_")
+        target = st.stoppingPlaceID or edge
+        try:
+            v.insertStop(vid, 0, target, float(st.endPos), int(index), float(st.duration), int(st.stopFlags),
+                         float(st.startPos), float(st.until))
+            return v.getStops(vid, 1)
+        except Exception:
+            self._skipped(p, "sumo")
+            return v.getStops(vid, 1)
+
+    def _towards_lane(self, vid: str, p: _Pending, st: Any) -> bool:
+        """For a stop on another lane of an edge of the route ahead: a
+        change one lane towards it when the vehicle is on that edge (and the
+        lane beside has room); True while the stop's lane can still be
+        reached (see the module docs)."""
+        edge, _, index = str(st.lane).rpartition("_")
+        if self.lane_changes is None or edge.startswith(":") or not index.isdigit():
+            return False
+        v = self.conn.sumo.vehicle
+        try:
+            road = v.getRoadID(vid)
+            at = max(int(v.getRouteIndex(vid)), 0)
+            if edge not in tuple(v.getRoute(vid))[at:]:
+                return False
+            if road != edge:
+                # Not on the stop's edge yet: a track that enters it on the stop's lane.
+                self._take_lane(p, edge, int(index))
+                return True
+            pos, current = float(v.getLanePosition(vid)), int(v.getLaneIndex(vid))
+        except Exception:
+            return False
+        want = int(index)
+        if current == want or pos > float(st.endPos) - STOP_LANE_ROOM_M:
+            return False
+        if p.act.changing is None and self.lane_changes.try_tactical_change(p.act, 1 if want > current else -1, for_stop=True):
+            self.counts["stop_lane_changes"] += 1
+            p.restore = st
+        return True
+
+    def _take_lane(self, p: _Pending, edge: str, want: int) -> None:
+        """Puts ``p``'s vehicle on the track of its route from the lane it is
+        on that enters ``edge`` on lane ``want`` where a connection allows
+        (``Tracks.geometry``'s ``prefer``), once blendtrack has its front
+        ``SHARE_AFTER_M`` into a normal lane of an earlier edge of its
+        track (as ``Tracks.leave_own_track``); built once per track the
+        vehicle is on."""
+        act = p.act
+        if self.lane_changes is None or act.changing is not None or act.own_track is not None:
+            return
+        if p.preferred is not None and p.preferred[0] is act.geo and p.preferred[1:] == (edge, want):
+            return
+        tracks = self.lane_changes.tracks
+        slot = act.slot
+        k = self.fleet.occurrence(slot)
+        edges = act.geo.edges
+        at = next((j for j in range(k + 1, len(edges)) if edges[j] == edge), None)
+        if at is None or k < 0:
+            return
+        lane_id, pos = self.fleet.front_lane_position(slot)
+        lane = self.lanes.names[lane_id]
+        own, _, index = lane.rpartition("_")
+        if lane.startswith(":") or edges[k] != own or not index.isdigit() or pos < SHARE_AFTER_M:
+            return
+        geo, track = tracks.geometry(edges[k:], int(index), prefer=((at - k, want),))
+        p.preferred = (geo, edge, want)
+        if geo is not act.geo:
+            base = act.route_base + k
+            tracks.retrack(act, geo, track, owned=False, base=base, route_index=base)
 
     def _check_started(self, vid: str, p: _Pending) -> None:
         """A vehicle standing at its halt that SUMO does not stop is let go."""
@@ -238,7 +345,7 @@ class Stops:
         """Skips SUMO's next stop of ``vid``: counted, removed from SUMO's schedule."""
         self._skipped(p, reason)
         self._clear(p)
-        p.key = None
+        p.key, p.reaching = None, False
         try:
             self.conn.sumo.vehicle.replaceStop(vid, 0, "")
         except Exception:

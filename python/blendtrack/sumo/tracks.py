@@ -35,7 +35,7 @@ IDLE_TRACK_S = 120.0
 #: track's start and SUMO lost it off the road a few seconds later).
 SHARE_AFTER_M = 15.0
 
-_Key = tuple[tuple[str, ...], int]
+_Key = tuple[tuple[str, ...], int, tuple[tuple[int, int], ...]]
 
 
 class Interned:
@@ -125,12 +125,15 @@ class Tracks:
             self.early.pop(act.vid, None)
 
     def geometry(
-        self, edges: tuple[str, ...], lane_index: int, change: tuple[float, float] | tuple[float, float, int] | None = None
+        self, edges: tuple[str, ...], lane_index: int, change: tuple[float, float] | tuple[float, float, int] | None = None,
+        prefer: tuple[tuple[int, int], ...] = (),
     ) -> tuple[RouteGeometry, int]:
         """The track of a route from a lane, registered with its lane pieces and
         stop lines; shared by every vehicle on the same route and lane (a track
-        with a lane change in it belongs to one vehicle)."""
-        key = (edges, lane_index)
+        with a lane change in it belongs to one vehicle). ``prefer``: (edge
+        index, lane index) pairs, lanes to take where the route allows (a
+        stop's; see ``geometry._pieces``), part of what is shared."""
+        key = (edges, lane_index, prefer)
         hit = self.geo_cache.get(key) if change is None else None
         if hit is None:
             network = self.network
@@ -138,6 +141,7 @@ class Tracks:
                 network.net(), edges, lane_index, defer_changes=True, change=change,
                 border_margin_m=self.border_margin_m,
                 carriageway=self.carriageway,
+                prefer=dict(prefer) if prefer else None,
             )
             path = blendtrack.Path(geo.points, geo.widths, closed=False)
             lanes, edge_ids = self.lanes, self.edges
