@@ -973,7 +973,7 @@ def _merge_junctions(conn: FakeConn) -> Junctions:
     ways = {"out": [((":m_0_0", 6.0),), ((":m_1_0", 8.0),)]}
     lengths = {"maj": 50.0, "min": 40.0}
     net = SimpleNamespace(lanes_after=lambda via: after.get(via, []), ways_into=lambda lane: ways.get(lane, []),
-                          lane_length=lengths.__getitem__)
+                          lane_length=lengths.__getitem__, lanes_into_merges=lambda: frozenset({"maj", "min"}))
     return Junctions(conn, net, None, None, 4.0)  # type: ignore[arg-type]
 
 
@@ -1077,6 +1077,7 @@ def test_the_network_lists_the_ways_that_merge(tmp_path: Path) -> None:
         assert all(name.startswith(":m_") and length == pytest.approx(net.lane_length(name)) for name, length in way)
         assert net.lanes_after(way[0][0])[-1][0] == "out_0"
     assert net.ways_into("main_0") == []
+    assert net.lanes_into_merges() == {"main_0", "side_0"}
 
 
 def test_a_leader_counts_when_the_vehicle_is_on_an_edge_without_the_target_lane() -> None:

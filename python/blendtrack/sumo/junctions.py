@@ -365,8 +365,13 @@ class Junctions:
             if own != lane:
                 return own, after[-1][0], lambda p: ahead - self._front_on(vid, own, p)
             return own, after[-1][0], lambda p: ahead - p
-        k = next((n for n, x in enumerate(track_lanes) if x == lane), None)
-        if k is None or k + 1 >= len(track_lanes) or not track_lanes[k + 1].startswith(":"):
+        if lane not in self.network.lanes_into_merges():
+            return None
+        try:
+            k = track_lanes.index(lane)
+        except ValueError:
+            return None
+        if k + 1 >= len(track_lanes) or not track_lanes[k + 1].startswith(":"):
             return None
         via = track_lanes[k + 1]
         after = self.network.lanes_after(via)

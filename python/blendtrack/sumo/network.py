@@ -50,6 +50,7 @@ class Network:
         self._fanouts: dict[str, tuple[tuple[str, ...], float]] | None = None
         self._into: dict[str, list[tuple[tuple[str, float], ...]]] | None = None
         self._lengths: dict[str, float] = {}
+        self._into_merges: frozenset[str] | None = None
 
     def net(self) -> Any:
         """The sumolib network."""
@@ -120,6 +121,20 @@ class Network:
                             into.setdefault(c.getToLane().getID(), []).append(chain)
             self._into = {k: v for k, v in into.items() if len(v) > 1}
         return self._into.get(lane, [])
+
+    def lanes_into_merges(self) -> frozenset[str]:
+        """The normal lanes with a connection onto a lane that several ways
+        merge onto (``ways_into``)."""
+        if self._into_merges is None:
+            self.ways_into("")
+            assert self._into is not None
+            self._into_merges = frozenset(
+                ln.getID()
+                for edge in self.net().getEdges() if edge.getFunction() != "internal"
+                for ln in edge.getLanes()
+                if any(c.getToLane().getID() in self._into for c in ln.getOutgoing())
+            )
+        return self._into_merges
 
     def lane_length(self, lane: str) -> float:
         """The length of ``lane`` (m)."""
