@@ -7,7 +7,6 @@ of ``lanechange.py`` and ``junctions.py`` (docs/testing.md)."""
 from __future__ import annotations
 
 import math
-import subprocess
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -1031,20 +1030,16 @@ def test_a_vehicle_merging_from_another_junction_lane_is_followed_when_it_gets_t
     assert j.leader_at_merge("me", "maj", track, None) is None
 
 
-def test_the_network_lists_the_lanes_that_fan_out(tmp_path: Path) -> None:
+def test_the_network_lists_the_lanes_that_fan_out(tmp_path: Path, build_net: Any) -> None:
     """A one-lane edge into a two-lane one: netconvert connects the lane to
     both, so it fans out; the two-lane edge into a one-lane one does not
     (two lanes onto one), nor does a lane with one connection."""
-    from blendtrack.sumo.connection import sumo_binary
     from blendtrack.sumo.network import Network
 
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="b" x="100" y="0"/>'
-                                        '<node id="c" x="200" y="0"/><node id="d" x="300" y="0"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="one" from="a" to="b" numLanes="1"/><edge id="two" from="b" to="c" numLanes="2"/>'
-                                        '<edge id="last" from="c" to="d" numLanes="1"/></edges>')
-    netconvert = Path(sumo_binary()).with_name("netconvert")
-    subprocess.run([str(netconvert), "-n", str(tmp_path / "n.nod.xml"), "-e", str(tmp_path / "n.edg.xml"),
-                    "-o", str(tmp_path / "n.net.xml"), "--no-turnarounds", "true"], check=True, capture_output=True)
+    build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="b" x="100" y="0"/>'
+                        '<node id="c" x="200" y="0"/><node id="d" x="300" y="0"/></nodes>',
+              '<edges><edge id="one" from="a" to="b" numLanes="1"/><edge id="two" from="b" to="c" numLanes="2"/>'
+              '<edge id="last" from="c" to="d" numLanes="1"/></edges>')
     fan = Network(tmp_path / "n.net.xml").fanouts()
     assert set(fan) == {"one_0"}
     vias, length = fan["one_0"]
@@ -1056,20 +1051,15 @@ def test_the_network_lists_the_lanes_that_fan_out(tmp_path: Path) -> None:
     assert net.ways_into("two_0") == [] and net.ways_into("two_1") == [] and net.ways_into("last_0") == []
 
 
-def test_the_network_lists_the_ways_that_merge(tmp_path: Path) -> None:
+def test_the_network_lists_the_ways_that_merge(tmp_path: Path, build_net: Any) -> None:
     """Edges "main" and "side" both lead onto the one lane of "out" at
     junction m: two ways (one junction lane each) merge onto "out_0"."""
-    from blendtrack.sumo.connection import sumo_binary
     from blendtrack.sumo.network import Network
 
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="a" x="0" y="0"/><node id="m" x="100" y="0"/>'
-                                        '<node id="s" x="50" y="-60"/><node id="d" x="200" y="0"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="main" from="a" to="m" priority="3"/><edge id="side" from="s" to="m" priority="1"/>'
-                                        '<edge id="out" from="m" to="d" priority="3"/></edges>')
-    netconvert = Path(sumo_binary()).with_name("netconvert")
-    subprocess.run([str(netconvert), "-n", str(tmp_path / "n.nod.xml"), "-e", str(tmp_path / "n.edg.xml"),
-                    "-o", str(tmp_path / "n.net.xml"), "--no-turnarounds", "true"], check=True, capture_output=True)
-    net = Network(tmp_path / "n.net.xml")
+    net = Network(build_net(tmp_path, '<nodes><node id="a" x="0" y="0"/><node id="m" x="100" y="0"/>'
+                                      '<node id="s" x="50" y="-60"/><node id="d" x="200" y="0"/></nodes>',
+                            '<edges><edge id="main" from="a" to="m" priority="3"/><edge id="side" from="s" to="m" priority="1"/>'
+                            '<edge id="out" from="m" to="d" priority="3"/></edges>'))
     ways = net.ways_into("out_0")
     froms = sorted(str(net.from_lane(w[0][0])) for w in ways)
     assert froms == ["main_0", "side_0"], ways

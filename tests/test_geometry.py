@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -247,26 +248,20 @@ def test_route_geometry_maps_track_positions_to_sumo_lane_positions() -> None:
     assert all(0.0 <= st[0] <= g.length_m for st in g.stops) and g.stops
 
 
-def test_a_preferred_lane_is_reached_as_a_lane_the_route_needs(tmp_path: Path) -> None:
+def test_a_preferred_lane_is_reached_as_a_lane_the_route_needs(tmp_path: Path, build_net: Any) -> None:
     """Three two-lane edges straight on (lane 0 to lane 0, 1 to 1): from
     lane 1 the track stays on lane 1. Asked for lane 0 of the last edge (a
     stop's lane), it gets there as for a lane the route needs: a change on
     an earlier edge (pending, with ``defer_changes``), never on the last
     edge itself. A lane index the edge does not have is no constraint."""
-    import subprocess
-
     sumolib = pytest.importorskip("sumolib")
-    from blendtrack.sumo.connection import sumo_binary
     from blendtrack.sumo.geometry import route_geometry
 
-    (tmp_path / "n.nod.xml").write_text('<nodes><node id="A" x="0" y="0"/><node id="B" x="300" y="0"/>'
-                                        '<node id="C" x="600" y="0"/><node id="D" x="900" y="0"/></nodes>')
-    (tmp_path / "n.edg.xml").write_text('<edges><edge id="AB" from="A" to="B" numLanes="2"/><edge id="BC" from="B" to="C" numLanes="2"/>'
-                                        '<edge id="CD" from="C" to="D" numLanes="2"/></edges>')
-    netconvert = Path(sumo_binary()).with_name("netconvert")
-    subprocess.run([str(netconvert), "-n", str(tmp_path / "n.nod.xml"), "-e", str(tmp_path / "n.edg.xml"),
-                    "-o", str(tmp_path / "n.net.xml"), "--no-turnarounds", "true"], check=True, capture_output=True)
-    net = sumolib.net.readNet(str(tmp_path / "n.net.xml"), withInternal=True)
+    path = build_net(tmp_path, '<nodes><node id="A" x="0" y="0"/><node id="B" x="300" y="0"/>'
+                               '<node id="C" x="600" y="0"/><node id="D" x="900" y="0"/></nodes>',
+                     '<edges><edge id="AB" from="A" to="B" numLanes="2"/><edge id="BC" from="B" to="C" numLanes="2"/>'
+                     '<edge id="CD" from="C" to="D" numLanes="2"/></edges>')
+    net = sumolib.net.readNet(str(path), withInternal=True)
     edges = ("AB", "BC", "CD")
     plain = route_geometry(net, edges, 1)
     assert [x for x in plain.piece_lane if not x.startswith(":")] == ["AB_1", "BC_1", "CD_1"]

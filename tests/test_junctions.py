@@ -331,27 +331,23 @@ def test_libsumo_and_traci_drive_the_crossing_alike(tmp_path: Path) -> None:
     assert recs and all(r.reason == "arrived" for r in recs), [(r.vid, r.reason) for r in recs if r.reason != "arrived"]
 
 
-def _fanout(tmp: Path) -> Path:
+def _fanout(tmp: Path, build_net: Any) -> Path:
     """A one-lane road ``AJ`` that widens to two lanes at junction ``J``
     (both lanes of ``JB`` fed from ``AJ_0``: their junction lanes start at
     one point and part); ``JB_0`` leads on to ``BD`` only, ``JB_1`` to ``BC``.
     The background ``b`` takes the right branch, the controlled ``c`` 40 m
     behind it the left one; 1 s steps."""
-    tmp.mkdir(parents=True, exist_ok=True)
-    (tmp / "n.nod.xml").write_text('<nodes><node id="A" x="0" y="0"/><node id="J" x="200" y="0" type="priority"/>'
-                                   '<node id="B" x="400" y="0"/>'
-                                   '<node id="C" x="600" y="100"/><node id="D" x="600" y="-100"/></nodes>\n')
-    (tmp / "n.edg.xml").write_text(f'<edges><edge id="AJ" from="A" to="J" numLanes="1" speed="{SPEED}"/>'
-                                   f'<edge id="JB" from="J" to="B" numLanes="2" speed="{SPEED}"/>'
-                                   f'<edge id="BC" from="B" to="C" numLanes="1" speed="{SPEED}"/>'
-                                   f'<edge id="BD" from="B" to="D" numLanes="1" speed="{SPEED}"/></edges>\n')
-    (tmp / "n.con.xml").write_text('<connections><connection from="AJ" to="JB" fromLane="0" toLane="0"/>'
-                                   '<connection from="AJ" to="JB" fromLane="0" toLane="1"/>'
-                                   '<connection from="JB" to="BD" fromLane="0" toLane="0"/>'
-                                   '<connection from="JB" to="BC" fromLane="1" toLane="0"/></connections>\n')
-    proc = subprocess.run([_netconvert(), "-n", str(tmp / "n.nod.xml"), "-e", str(tmp / "n.edg.xml"), "-x", str(tmp / "n.con.xml"),
-                           "-o", str(tmp / "n.net.xml"), "--no-turnarounds", "true"], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
+    build_net(tmp, '<nodes><node id="A" x="0" y="0"/><node id="J" x="200" y="0" type="priority"/>'
+                   '<node id="B" x="400" y="0"/>'
+                   '<node id="C" x="600" y="100"/><node id="D" x="600" y="-100"/></nodes>\n',
+              f'<edges><edge id="AJ" from="A" to="J" numLanes="1" speed="{SPEED}"/>'
+              f'<edge id="JB" from="J" to="B" numLanes="2" speed="{SPEED}"/>'
+              f'<edge id="BC" from="B" to="C" numLanes="1" speed="{SPEED}"/>'
+              f'<edge id="BD" from="B" to="D" numLanes="1" speed="{SPEED}"/></edges>\n',
+              '<connections><connection from="AJ" to="JB" fromLane="0" toLane="0"/>'
+              '<connection from="AJ" to="JB" fromLane="0" toLane="1"/>'
+              '<connection from="JB" to="BD" fromLane="0" toLane="0"/>'
+              '<connection from="JB" to="BC" fromLane="1" toLane="0"/></connections>\n')
     (tmp / "r.rou.xml").write_text(
         '<routes><vType id="bg" sigma="0"/><vType id="ctl"><param key="blendtrack.controlled" value="true"/></vType>'
         '<route id="right" edges="AJ JB BD"/><route id="left" edges="AJ JB BC"/>'
@@ -398,7 +394,7 @@ def _stand_past_exit(run: SumoRun, t: float) -> None:
 
 
 @pytest.mark.parametrize("hook", [_crawl_in_junction, _stand_past_exit])
-def test_a_vehicle_on_the_other_branch_of_a_fanout_is_not_run_into(tmp_path: Path, hook: Any) -> None:
+def test_a_vehicle_on_the_other_branch_of_a_fanout_is_not_run_into(tmp_path: Path, hook: Any, build_net: Any) -> None:
     """A vehicle from the same lane that entered the junction ahead and
     drives on is followed, not waited for; but one crawling with its body
     still across the controlled vehicle's way, or standing just past the
@@ -406,7 +402,7 @@ def test_a_vehicle_on_the_other_branch_of_a_fanout_is_not_run_into(tmp_path: Pat
     Before, any such vehicle moving at SUMO's halting speed or more counted
     as one to follow, and one past the exit was not looked at: the
     controlled vehicle drove into both (Bologna, junctions 56m and 8)."""
-    cfg = _fanout(tmp_path / "net")
+    cfg = _fanout(tmp_path / "net", build_net)
     watch = Watch()
     watch.extra.append(hook)
     run, s = _run(cfg, tmp_path / "o", watch, controlled_ids=("c",))
@@ -420,23 +416,19 @@ def test_a_vehicle_on_the_other_branch_of_a_fanout_is_not_run_into(tmp_path: Pat
     assert "JB_1" in lanes and "JB_0" not in lanes, lanes
 
 
-def _long_junction(tmp: Path) -> Path:
+def _long_junction(tmp: Path, build_net: Any) -> Path:
     """Road ``AJ`` goes straight on through junction ``J``, drawn 30 m long
     (a junction lane of about 30 m), onto ``JB``; a minor road ``SJ``-``JN``
     crosses it (no traffic: its lanes make the junction lane one SUMO checks
     for junction collisions at every stage); SUMO's ``v`` drives ahead
     of ``f``, 20 m apart, both at 10 m/s (their top speed), 0.1 s steps."""
-    tmp.mkdir(parents=True, exist_ok=True)
-    (tmp / "n.nod.xml").write_text('<nodes><node id="A" x="0" y="0"/>'
-                                   '<node id="J" x="200" y="0" type="priority" shape="185,-6 215,-6 215,6 185,6"/>'
-                                   '<node id="B" x="400" y="0"/><node id="S" x="200" y="-200"/><node id="N" x="200" y="200"/></nodes>\n')
-    (tmp / "n.edg.xml").write_text(f'<edges><edge id="AJ" from="A" to="J" numLanes="1" speed="{SPEED}" priority="3"/>'
-                                   f'<edge id="JB" from="J" to="B" numLanes="1" speed="{SPEED}" priority="3"/>'
-                                   f'<edge id="SJ" from="S" to="J" numLanes="1" speed="{SPEED}" priority="1"/>'
-                                   f'<edge id="JN" from="J" to="N" numLanes="1" speed="{SPEED}" priority="1"/></edges>\n')
-    proc = subprocess.run([_netconvert(), "-n", str(tmp / "n.nod.xml"), "-e", str(tmp / "n.edg.xml"),
-                           "-o", str(tmp / "n.net.xml"), "--no-turnarounds", "true"], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
+    build_net(tmp, '<nodes><node id="A" x="0" y="0"/>'
+                   '<node id="J" x="200" y="0" type="priority" shape="185,-6 215,-6 215,6 185,6"/>'
+                   '<node id="B" x="400" y="0"/><node id="S" x="200" y="-200"/><node id="N" x="200" y="200"/></nodes>\n',
+              f'<edges><edge id="AJ" from="A" to="J" numLanes="1" speed="{SPEED}" priority="3"/>'
+              f'<edge id="JB" from="J" to="B" numLanes="1" speed="{SPEED}" priority="3"/>'
+              f'<edge id="SJ" from="S" to="J" numLanes="1" speed="{SPEED}" priority="1"/>'
+              f'<edge id="JN" from="J" to="N" numLanes="1" speed="{SPEED}" priority="1"/></edges>\n')
     (tmp / "r.rou.xml").write_text(
         '<routes><vType id="bg" sigma="0" length="5" maxSpeed="10"/><route id="r" edges="AJ JB"/>'
         '<vehicle id="v" type="bg" route="r" depart="0" departPos="150" departSpeed="10"/>'
@@ -448,7 +440,7 @@ def _long_junction(tmp: Path) -> Path:
 
 
 @pytest.mark.parametrize("move", ["moveTo", "moveToXY"])
-def test_sumo_keeps_a_vehicle_moved_by_lane_position_on_the_lane_it_lapped_onto(tmp_path: Path, move: str) -> None:
+def test_sumo_keeps_a_vehicle_moved_by_lane_position_on_the_lane_it_lapped_onto(tmp_path: Path, move: str, build_net: Any) -> None:
     """Why blendtrack places a vehicle whose back SUMO still has on the lane
     before by (x, y): SUMO's ``moveTo`` onto the lane the vehicle is on only
     sets its position, and the junction lane behind keeps it as an occupant
@@ -457,7 +449,7 @@ def test_sumo_keeps_a_vehicle_moved_by_lane_position_on_the_lane_it_lapped_onto(
     point given by ``moveToXY`` is not. (If SUMO mends ``moveTo``, the first
     case fails and the cheaper move can come back: RouteFleet's
     ``laps_back_onto_the_lane_before``.)"""
-    cfg = _long_junction(tmp_path / "net")
+    cfg = _long_junction(tmp_path / "net", build_net)
     done: list[tuple[str, float]] = []
 
     def hook(run: SumoRun, t: float) -> None:
