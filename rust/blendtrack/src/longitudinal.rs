@@ -322,6 +322,9 @@ const STRIP_MAX_COORDINATE_M: f64 = 1e10;
 /// Segments per run (strip) of a border.
 const RUN_SEGMENTS: usize = 8;
 
+/// Steps [`Border::vertex_holding_from`] walks from its guess before it looks up.
+const VERTEX_WALK_STEPS: usize = 4;
+
 /// A ray `o + t u` with what its strip tests need, computed once per ray cast.
 struct Ray<'a> {
     o: &'a Point2<f64>,
@@ -551,6 +554,29 @@ impl Border {
         s.partition_point(|&v| v <= at).saturating_sub(1)
     }
 
+    /// [`Self::vertex_holding`] by a walk of a few steps from `hint` (the
+    /// answer near there, e.g. the last ray cast's), else (a hint out of
+    /// range or too far off) by the look-up: the same vertex either way.
+    #[inline(always)]
+    fn vertex_holding_from(&self, at: f64, hint: usize) -> usize {
+        let s = &self.s[..];
+        // `at >= s[0]` is also false for a NaN `at` (vertex_holding gives 0).
+        if hint < s.len() && at >= s[0] {
+            let mut k = hint;
+            for _ in 0..VERTEX_WALK_STEPS {
+                if s[k] > at {
+                    // s[0] <= at: k > 0 here.
+                    k -= 1;
+                } else if k + 1 < s.len() && s[k + 1] <= at {
+                    k += 1;
+                } else {
+                    return k;
+                }
+            }
+        }
+        self.vertex_holding(at)
+    }
+
     /// Ray parameter at which the ray leaves the corridor through segment `k`.
     #[inline]
     fn exit(&self, k: usize, u: &Vector2<f64>, o: &Point2<f64>) -> Option<f64> {
@@ -636,7 +662,17 @@ impl Border {
     /// checked against the stop (within a run the ends grow, so the scan
     /// stops after the run if and only if it would have stopped within
     /// it); in the other runs a segment costs its test and one comparison.
-    fn first_exit(&self, ray: &Ray, start_s: f64, scan_m: f64, slack_m: f64) -> f64 {
+    ///
+    /// `start_hint`: a guess of the vertex holding `start_s` (any value),
+    /// set to that vertex.
+    fn first_exit(
+        &self,
+        ray: &Ray,
+        start_s: f64,
+        scan_m: f64,
+        slack_m: f64,
+        start_hint: &mut usize,
+    ) -> f64 {
         let (u, o) = (ray.u, ray.o);
         let segs = &self.segs[..];
         let n_seg = segs.len();
@@ -644,7 +680,9 @@ impl Border {
             return f64::INFINITY;
         }
         // Segment holding start_s.
-        let mut k = self.vertex_holding(start_s).min(n_seg - 1);
+        let start = self.vertex_holding_from(start_s, *start_hint);
+        *start_hint = start;
+        let mut k = start.min(n_seg - 1);
         let mut scan = Scan {
             best: f64::INFINITY,
             stop: 0.0,
@@ -881,6 +919,22 @@ impl Corridor {
         s_origin: f64,
         horizon_m: f64,
     ) -> Option<f64> {
+        self.ray_cast_along_from(path, origin, u, s_origin, horizon_m, &mut [usize::MAX; 2])
+    }
+
+    /// [`Self::ray_cast_along`] with guesses of the (left, right) border
+    /// vertices where the scans start (any values; the last ray cast's
+    /// nearby save the look-ups), set to those vertices.
+    #[inline]
+    pub(crate) fn ray_cast_along_from(
+        &self,
+        path: &Path,
+        origin: &Point2<f64>,
+        u: &Vector2<f64>,
+        s_origin: f64,
+        horizon_m: f64,
+        start_hints: &mut [usize; 2],
+    ) -> Option<f64> {
         let back = self.max_width_m + 1.0;
         let start_s = if path.is_closed() {
             path.wrap_s(s_origin - back)
@@ -890,10 +944,14 @@ impl Corridor {
         let scan = back + horizon_m;
         let slack = back + 2.0 * self.max_width_m + 5.0;
         let ray = Ray::new(origin, u);
+        let [left_hint, right_hint] = start_hints;
         let best = self
             .left_simple
-            .first_exit(&ray, start_s, scan, slack)
-            .min(self.right_simple.first_exit(&ray, start_s, scan, slack));
+            .first_exit(&ray, start_s, scan, slack, left_hint)
+            .min(
+                self.right_simple
+                    .first_exit(&ray, start_s, scan, slack, right_hint),
+            );
         if best.is_finite() {
             Some(best)
         } else {
@@ -1455,7 +1513,15 @@ mod tests {
                     let ray = Ray::new(&o, &u);
                     for b in [&cor.left_simple, &cor.right_simple] {
                         let want = plain_first_exit(b, &u, &o, start_s, scan_m, slack_m);
-                        let got = b.first_exit(&ray, start_s, scan_m, slack_m);
+                        // Guesses of the start vertex: none, anywhere, near it.
+                        let at = b.vertex_holding(start_s);
+                        let mut hint = match (3.0 * rnd()) as u32 {
+                            0 => usize::MAX,
+                            1 => (rnd() * b.s.len() as f64) as usize,
+                            _ => (at + (9.0 * rnd()) as usize).saturating_sub(4),
+                        };
+                        let got = b.first_exit(&ray, start_s, scan_m, slack_m, &mut hint);
+                        assert_eq!(hint, at, "start {start_s}");
                         assert_eq!(
                             got.to_bits(),
                             want.to_bits(),

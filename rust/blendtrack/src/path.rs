@@ -608,6 +608,26 @@ impl Path {
         self.seg_heading(k, off)
     }
 
+    /// [`Self::heading_at_from`] and the segment holding `s` (the guess for
+    /// the next look-up near there).
+    #[inline]
+    pub(crate) fn heading_and_segment_at_from(&self, s: f64, segment_hint: usize) -> (f64, usize) {
+        let (k, off) = self.locate_from(s, segment_hint);
+        (self.seg_heading(k, off), k)
+    }
+
+    /// [`Self::point_at`] with a guess of the segment holding `s` (as
+    /// [`Self::heading_at_from`]), and the segment holding `s`.
+    #[inline]
+    pub(crate) fn point_and_segment_at_from(
+        &self,
+        s: f64,
+        segment_hint: usize,
+    ) -> (Point2<f64>, usize) {
+        let (k, off) = self.locate_from(s, segment_hint);
+        (self.points[k] + self.seg_dir[k] * off, k)
+    }
+
     /// Unit tangent at arc length `s`.
     pub fn tangent_at(&self, s: f64) -> Vector2<f64> {
         let h = self.heading_at(s);
