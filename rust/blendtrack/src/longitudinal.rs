@@ -98,8 +98,23 @@ impl Obstacle {
 #[inline]
 pub fn free_flow_accel(speed_abs: f64, cfg: &ControllerConfig) -> f64 {
     let a = cfg.preferred_acceleration
-        * (1.0 - (speed_abs / cfg.preferred_speed).powf(cfg.acceleration_exp));
+        * (1.0 - ratio_pow(speed_abs / cfg.preferred_speed, cfg.acceleration_exp));
     a.max(cfg.deceleration_factor * cfg.preferred_deceleration)
+}
+
+/// `x.powf(y)`, without the call where its value is exact and known: 1 at
+/// `x = 1` (for every `y`, NaN too: C's `pow`), +0 at `x = +0` for `y > 0`.
+/// A vehicle cruising at its preferred speed (the free-flow law's fixed
+/// point) or standing still hits these.
+#[inline]
+fn ratio_pow(x: f64, y: f64) -> f64 {
+    if x == 1.0 {
+        1.0
+    } else if x == 0.0 && x.is_sign_positive() && y > 0.0 {
+        0.0
+    } else {
+        x.powf(y)
+    }
 }
 
 /// The reaction-time stopping law (the larger root): the acceleration that,
@@ -1128,6 +1143,41 @@ mod tests {
             cfg.max_deceleration,
             cfg.max_obs_deceleration,
         )
+    }
+
+    #[test]
+    fn ratio_pow_is_powf_bit_for_bit() {
+        let xs = [
+            0.0,
+            -0.0,
+            1.0,
+            1.0 - 1e-16,
+            1.0 + 2e-16,
+            0.5,
+            1.5,
+            5e-324,
+            f64::NAN,
+            f64::INFINITY,
+        ];
+        let ys = [
+            3.0,
+            4.0,
+            2.5,
+            1.0,
+            0.5,
+            1e-300,
+            0.0,
+            -1.0,
+            -3.0,
+            f64::NAN,
+            f64::INFINITY,
+        ];
+        for x in xs {
+            for y in ys {
+                let (got, want) = (ratio_pow(x, y), x.powf(y));
+                assert!(got.to_bits() == want.to_bits(), "{x}^{y}: {got} vs {want}");
+            }
+        }
     }
 
     #[test]
