@@ -35,7 +35,7 @@ use crate::controller::{Controller, Track};
 use crate::error::ConfigError;
 use crate::longitudinal::Obstacle;
 use crate::path::Path;
-use crate::vehicle::{advance, Command, VehicleParams, VehicleState};
+use crate::vehicle::{advance, Command, HeadingTrig, VehicleParams, VehicleState};
 use std::sync::Arc;
 use thiserror::Error;
 
@@ -168,6 +168,11 @@ struct Entry {
     track_id: usize,
     controller: Controller,
     params: VehicleParams,
+    /// The sine and cosine of the heading the last step integrated (before
+    /// wrapping): a caller that feeds the next state back as the next
+    /// step's input gives that heading, whose sine and cosine are then not
+    /// taken again.
+    next_trig: Option<HeadingTrig>,
 }
 
 #[derive(Debug, Clone)]
@@ -297,6 +302,7 @@ impl Fleet {
             track_id: track_id as usize,
             controller,
             params,
+            next_trig: None,
         };
         let slot = match self.slots.iter().position(Option::is_none) {
             Some(i) => {
@@ -747,8 +753,9 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
     } else {
         None
     };
-    // The heading's (cos, sin), for the controller and the integration alike.
-    let h = state.heading_vec();
+    // The heading's (cos, sin), for the controller and the integration
+    // alike (the last step's when it integrated this very heading).
+    let h = HeadingTrig::heading_vec(e.next_trig, state.theta_rad);
     let Ok(o) = e
         .controller
         .step_limited_along(&state, h, alpha, &obstacles[..n_obs], limit)
@@ -758,7 +765,7 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
     let next = match inp.dt_s {
         // A vehicle without delay, as Vehicle::step moves it.
         Some(dt) => {
-            advance(
+            let (next, _, trig) = advance(
                 &state,
                 &e.params,
                 e.controller.config().direction,
@@ -768,8 +775,9 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
                 },
                 dt,
                 || (h.y, h.x),
-            )
-            .0
+            );
+            e.next_trig = trig;
+            next
         }
         None => Row::default().next,
     };
