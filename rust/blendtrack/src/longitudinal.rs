@@ -680,6 +680,7 @@ impl Border {
     ///
     /// `start_hint`: a guess of the vertex holding `start_s` (any value),
     /// set to that vertex.
+    #[inline(always)]
     fn first_exit(
         &self,
         ray: &Ray,

@@ -712,7 +712,7 @@ impl Path {
     }
 
     /// A projection without the curvature (left at NaN), for callers that do not need it.
-    #[inline]
+    #[inline(always)]
     fn make_projection_flat(&self, p: &Point2<f64>, k: usize, t: f64, dist2: f64) -> Projection {
         let g = &self.segs[k];
         let foot = g.a + g.dir * t;
@@ -865,6 +865,7 @@ impl Path {
         (self.foot_s(k, t), k)
     }
 
+    #[inline(always)]
     fn nearest_near(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> (f64, usize, f64) {
         let Some(bound) = self.hint_bound(hint_s) else {
             return self.nearest_full(p);
@@ -1008,6 +1009,7 @@ impl Path {
     /// From segment `k`, on along `advance` while the next segment is nearer
     /// to `p` than `best` (which it updates), at most `budget` segments.
     /// Returns how many segments it moved.
+    #[inline(always)]
     fn descend(
         &self,
         p: &Point2<f64>,
