@@ -122,10 +122,12 @@ struct Seg {
     len: f64,
     /// Arc length at the start (`s[k]`).
     s0: f64,
-    /// Vertex headings (tangents, bisecting the adjacent segments) at the
-    /// start and the end of the segment.
+    /// Vertex heading (tangent, bisecting the adjacent segments) at the
+    /// start of the segment, and the wrapped turn to the one at its end:
+    /// `wrap_angle(h1 - h0)`, which every heading look-up on the segment
+    /// needs.
     h0: f64,
-    h1: f64,
+    dh: f64,
 }
 
 impl Path {
@@ -197,7 +199,7 @@ impl Path {
                 len: seg_len[k],
                 s0: s[k],
                 h0: vertex_heading[k],
-                h1: vertex_heading[(k + 1) % n],
+                dh: wrap_angle(vertex_heading[(k + 1) % n] - vertex_heading[k]),
             })
             .collect();
         Ok(Path {
@@ -578,9 +580,8 @@ impl Path {
     #[inline(always)]
     fn seg_heading(&self, k: usize, offset: f64) -> f64 {
         let g = &self.segs[k];
-        let (a, b) = (g.h0, g.h1);
         let u = (offset / g.len).clamp(0.0, 1.0);
-        wrap_angle(a + u * wrap_angle(b - a))
+        wrap_angle(g.h0 + u * g.dh)
     }
 
     /// Index of the segment holding arc length `s`.
