@@ -689,7 +689,6 @@ impl Border {
         slack_m: f64,
         start_hint: &mut usize,
     ) -> f64 {
-        let (u, o) = (ray.u, ray.o);
         let segs = &self.segs[..];
         let n_seg = segs.len();
         if n_seg == 0 {
@@ -698,7 +697,7 @@ impl Border {
         // Segment holding start_s.
         let start = self.vertex_holding_from(start_s, *start_hint);
         *start_hint = start;
-        let mut k = start.min(n_seg - 1);
+        let k = start.min(n_seg - 1);
         let mut scan = Scan {
             best: f64::INFINITY,
             stop: 0.0,
@@ -709,58 +708,71 @@ impl Border {
         };
         scan.update_stop();
         let strips = &self.strips[..];
-        let mut r = k / RUN_SEGMENTS;
+        let n_runs = strips.len();
+        let r0 = k / RUN_SEGMENTS;
+        let (mut r, mut from) = (r0, k);
         // The side of the current run's first vertex (the last run's `p1`).
-        let mut s0 = ray.side(&segs[r * RUN_SEGMENTS].a);
-        // Segments not yet visited (each is visited at most once).
-        let mut left = n_seg;
-        loop {
+        let mut s0 = ray.side(&segs[r0 * RUN_SEGMENTS].a);
+        // Each segment is visited at most once: run r0 from segment k on,
+        // then whole runs, on a closed border round to the run before r0,
+        // and last the part of run r0 before k (if any).
+        let visits = if self.closed { n_runs } else { n_runs - r0 };
+        for _ in 0..visits {
             let strip = &strips[r];
-            let run_end = ((r + 1) * RUN_SEGMENTS).min(n_seg);
-            let end = run_end.min(k + left);
-            left -= end - k;
+            let end = ((r + 1) * RUN_SEGMENTS).min(n_seg);
             let s1 = ray.side(&strip.p1);
-            if ray.misses_strip(s0, s1, strip.half_width) {
-                let end_s = if end == run_end {
-                    strip.end_s
-                } else {
-                    segs[end - 1].end_s
-                };
-                let mut scanned = end_s - start_s;
-                if self.closed && scanned < 0.0 {
-                    scanned += self.path_length;
-                }
-                if scanned > scan.stop {
-                    break;
-                }
-            } else {
-                let run = &segs[k..end];
-                // Within a run the end arc lengths grow: if the first is not
-                // behind start_s, none is and no wrap-around correction applies.
-                let stopped = if self.closed && run[0].end_s - start_s < 0.0 {
-                    self.scan_run::<true>(run, &mut scan, u, o)
-                } else {
-                    self.scan_run::<false>(run, &mut scan, u, o)
-                };
-                if stopped {
-                    break;
-                }
-            }
-            if left == 0 {
-                break;
+            if self.visit_stops(ray, &mut scan, s0, s1, strip, from..end, strip.end_s) {
+                return scan.best;
             }
             s0 = s1;
-            k = end;
             r += 1;
-            if k >= n_seg {
-                if !self.closed {
-                    break;
-                }
-                k = 0;
+            if r == n_runs {
                 r = 0;
             }
+            from = r * RUN_SEGMENTS;
+        }
+        if self.closed && k > r0 * RUN_SEGMENTS {
+            let strip = &strips[r0];
+            let s1 = ray.side(&strip.p1);
+            let end_s = segs[k - 1].end_s;
+            self.visit_stops(ray, &mut scan, s0, s1, strip, r0 * RUN_SEGMENTS..k, end_s);
         }
         scan.best
+    }
+
+    /// One run's part `range` in [`Self::first_exit`]: skipped if the ray
+    /// passes its strip clear (given the sides `s0`, `s1` of the strip's
+    /// chord ends), the scan then stopping if the arc length to `end_s`
+    /// (the part's last segment's end) is beyond the stop, else each
+    /// segment tested ([`Self::scan_run`]). True once the scan is to stop.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn visit_stops(
+        &self,
+        ray: &Ray,
+        scan: &mut Scan,
+        s0: f64,
+        s1: f64,
+        strip: &Strip,
+        range: std::ops::Range<usize>,
+        end_s: f64,
+    ) -> bool {
+        if ray.misses_strip(s0, s1, strip.half_width) {
+            let mut scanned = end_s - scan.start_s;
+            if self.closed && scanned < 0.0 {
+                scanned += self.path_length;
+            }
+            scanned > scan.stop
+        } else {
+            let run = &self.segs[range];
+            // Within a run the end arc lengths grow: if the first is not
+            // behind start_s, none is and no wrap-around correction applies.
+            if self.closed && run[0].end_s - scan.start_s < 0.0 {
+                self.scan_run::<true>(run, scan, ray.u, ray.o)
+            } else {
+                self.scan_run::<false>(run, scan, ray.u, ray.o)
+            }
+        }
     }
 
     /// Tests the segments of `run` in turn (see [`Self::first_exit`]);

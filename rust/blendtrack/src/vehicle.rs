@@ -521,7 +521,10 @@ mod tests {
             let (x, y, th) = integrate_pose(3.0, -2.0, theta, v, delta, 2.7, 0.1);
             let ((x2, y2, th2), trig) =
                 integrate_pose_trig(3.0, -2.0, theta, || theta.sin_cos(), v, delta, 2.7, 0.1);
-            assert_eq!([x, y, th].map(f64::to_bits), [x2, y2, th2].map(f64::to_bits));
+            assert_eq!(
+                [x, y, th].map(f64::to_bits),
+                [x2, y2, th2].map(f64::to_bits)
+            );
             let next = VehicleState {
                 theta_rad: th,
                 ..st
@@ -529,7 +532,10 @@ mod tests {
             let h = HeadingTrig::heading_vec(trig, th);
             assert_eq!(
                 [h.x.to_bits(), h.y.to_bits()],
-                [next.heading_vec().x.to_bits(), next.heading_vec().y.to_bits()],
+                [
+                    next.heading_vec().x.to_bits(),
+                    next.heading_vec().y.to_bits()
+                ],
                 "theta {theta} v {v} delta {delta}"
             );
             reused += trig.is_some_and(|t| t.theta_rad == th) as usize;
