@@ -758,11 +758,13 @@ impl Border {
         end_s: f64,
     ) -> bool {
         if ray.misses_strip(s0, s1, strip.half_width) {
-            let mut scanned = end_s - scan.start_s;
-            if self.closed && scanned < 0.0 {
-                scanned += self.path_length;
-            }
+            // `scanned > stop` with `scanned` as in scan_run (the path
+            // length added on a closed border when negative), testing the
+            // common case first: a negative `scanned` above the stop is
+            // above it also with the (positive) length added.
+            let scanned = end_s - scan.start_s;
             scanned > scan.stop
+                || (self.closed && scanned < 0.0 && scanned + self.path_length > scan.stop)
         } else {
             let run = &self.segs[range];
             // Within a run the end arc lengths grow: if the first is not
