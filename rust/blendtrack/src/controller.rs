@@ -11,8 +11,9 @@ use crate::config::{validate_vehicle, AlphaMode, ControllerConfig, LateralKind};
 use crate::curve_speed::{curve_accel, CurveProfile};
 use crate::error::{ConfigError, StateError};
 use crate::lateral::{
-    auto_alpha, blend, lookahead_forcing, pure_pursuit_command, rear_command, stanley_command,
-    steady_curvature, travel_heading, AutoAlphaInputs, AutoAlphaParams, LateralGains, Travel,
+    auto_alpha, blend, lookahead_forcing, pure_pursuit_command_from, rear_command_from,
+    stanley_command, steady_curvature, travel_heading, AutoAlphaInputs, AutoAlphaParams,
+    LateralGains, Travel,
 };
 use crate::longitudinal::{longitudinal_accel, relevance_distance, Corridor, Obstacle};
 use crate::path::{wrap_angle, Path};
@@ -96,12 +97,16 @@ pub struct Controller {
     hint_front: Option<f64>,
     hint_cp: Option<f64>,
     /// The segments of the last step's foot points (rear, front, control
-    /// point): where the look-up of each hint starts (`usize::MAX`: none).
-    hint_segments: [usize; 3],
+    /// point) and of the rear law's or pure pursuit's look-ahead point:
+    /// where the look-up of each starts (`usize::MAX`: none).
+    hint_segments: [usize; 4],
     /// The rear axle and heading of the last step: the hints are moved on by
     /// the distance travelled along that heading since, so each projection
     /// starts next to its foot point.
     last_rear: Option<(Point2<f64>, Vector2<f64>)>,
+    /// The border vertices (left, right) where the last ray cast's scans
+    /// started: where the next one's look-ups start.
+    ray_hints: [usize; 2],
 }
 
 impl Controller {
@@ -130,8 +135,9 @@ impl Controller {
             hint_rear: None,
             hint_front: None,
             hint_cp: None,
-            hint_segments: [usize::MAX; 3],
+            hint_segments: [usize::MAX; 4],
             last_rear: None,
+            ray_hints: [usize::MAX; 2],
         })
     }
 
@@ -150,8 +156,9 @@ impl Controller {
         self.hint_rear = None;
         self.hint_front = None;
         self.hint_cp = None;
-        self.hint_segments = [usize::MAX; 3];
+        self.hint_segments = [usize::MAX; 4];
         self.last_rear = None;
+        self.ray_hints = [usize::MAX; 2];
     }
 
     /// Starts the projections of the next step from the rear axle at arc
@@ -298,7 +305,7 @@ impl Controller {
             .map_or(0.0, |(p, h_last)| (rear_pt - p).dot(&h_last));
         self.last_rear = Some((rear_pt, h));
         let near = |hint: Option<f64>| hint.map_or(f64::NAN, |s| s + moved);
-        let [seg_rear, seg_front, seg_cp] = self.hint_segments;
+        let [seg_rear, seg_front, seg_cp, seg_look] = self.hint_segments;
         let rear = path.project_near_from(&rear_pt, near(self.hint_rear), seg_rear);
         self.hint_rear = Some(rear.s);
         // Every controller projects the front axle: its error is reported.
@@ -313,7 +320,7 @@ impl Controller {
             AlphaMode::Fixed => alpha,
             AlphaMode::Auto => self.auto_alpha(rear.s, front.lateral_m, rear.lateral_m, speed),
         };
-        let (alpha, d_front, d_rear, raw) = self.lateral_commands(
+        let (alpha, d_front, d_rear, raw, seg_look) = self.lateral_commands(
             path,
             &front,
             &rear,
@@ -321,6 +328,7 @@ impl Controller {
             measured.theta_rad,
             speed,
             alpha,
+            seg_look,
         );
         let steering = raw.clamp(-self.max_steering_rad, self.max_steering_rad);
 
@@ -332,7 +340,7 @@ impl Controller {
         let mut cp = path.project_near_from(&cp_pt, cp_hint, cp_seg);
         cp.curvature_per_m = path.curvature_at_from(cp.s, cp.segment);
         self.hint_cp = Some(cp.s);
-        self.hint_segments = [rear.segment, front.segment, cp.segment];
+        self.hint_segments = [rear.segment, front.segment, cp.segment, seg_look];
         let th_travel = travel_heading(measured.theta_rad, dir);
 
         let (d_obs, accel) = if self.cfg.curve_lateral_accel > 0.0 {
@@ -353,10 +361,14 @@ impl Controller {
                     Vector2::new(th_travel.cos(), th_travel.sin())
                 }
             };
-            let d_obs = self
-                .track
-                .corridor
-                .ray_cast_along(path, &rear_pt, &u, rear.s, horizon);
+            let d_obs = self.track.corridor.ray_cast_along_from(
+                path,
+                &rear_pt,
+                &u,
+                rear.s,
+                horizon,
+                &mut self.ray_hints,
+            );
             let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
             (d_obs, lon.accel_mps2)
         };
@@ -390,7 +402,9 @@ impl Controller {
     }
 
     /// The blend's two commands (NaN for a law a baseline does not use),
-    /// the alpha it used and the unclamped steering.
+    /// the alpha it used, the unclamped steering and the segment of the
+    /// rear law's or pure pursuit's look-ahead point (`seg_look`, its
+    /// guess: the last step's; unchanged for Stanley).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn lateral_commands(
@@ -402,32 +416,34 @@ impl Controller {
         theta_rad: f64,
         speed: f64,
         alpha: f64,
-    ) -> (f64, f64, f64, f64) {
+        seg_look: usize,
+    ) -> (f64, f64, f64, f64, usize) {
         let dir = self.cfg.direction;
         let travel = Travel {
             theta_rad,
             speed_abs: speed,
             direction: dir,
         };
-        let (alpha, d_front, d_rear) = match self.cfg.lateral_controller {
+        let (alpha, d_front, d_rear, seg_look) = match self.cfg.lateral_controller {
             LateralKind::Blend => {
                 let df = stanley_command(front, &travel, &self.gains());
-                let dr = rear_command(path, rear, &travel, &self.gains());
-                (alpha, df, dr)
+                let (dr, look) = rear_command_from(path, rear, &travel, &self.gains(), seg_look);
+                (alpha, df, dr, look)
             }
             LateralKind::Stanley => {
                 let df = stanley_command(front, &travel, &self.gains());
-                (1.0, df, f64::NAN)
+                (1.0, df, f64::NAN, seg_look)
             }
             LateralKind::PurePursuit => {
-                let dr = pure_pursuit_command(
+                let (dr, look) = pure_pursuit_command_from(
                     path,
                     (rear_pt.x, rear_pt.y),
                     rear,
                     &travel,
                     &self.gains(),
+                    seg_look,
                 );
-                (0.0, f64::NAN, dr)
+                (0.0, f64::NAN, dr, look)
             }
         };
         let raw = match self.cfg.lateral_controller {
@@ -435,7 +451,7 @@ impl Controller {
             LateralKind::Stanley => d_front,
             LateralKind::PurePursuit => d_rear,
         };
-        (alpha, d_front, d_rear, raw)
+        (alpha, d_front, d_rear, raw, seg_look)
     }
 }
 

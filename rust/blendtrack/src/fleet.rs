@@ -31,11 +31,11 @@
 //! A NaN alpha means "use the vehicle's configured `lat_blend_factor`".
 
 use crate::config::{validate_vehicle, ControllerConfig};
-use crate::controller::{Controller, Track};
+use crate::controller::{ControlOutput, Controller, Track};
 use crate::error::ConfigError;
 use crate::longitudinal::Obstacle;
 use crate::path::Path;
-use crate::vehicle::{advance, Command, VehicleParams, VehicleState};
+use crate::vehicle::{advance, Command, HeadingTrig, VehicleParams, VehicleState};
 use std::sync::Arc;
 use thiserror::Error;
 
@@ -168,6 +168,11 @@ struct Entry {
     track_id: usize,
     controller: Controller,
     params: VehicleParams,
+    /// The sine and cosine of the heading the last step integrated (before
+    /// wrapping): a caller that feeds the next state back as the next
+    /// step's input gives that heading, whose sine and cosine are then not
+    /// taken again.
+    next_trig: Option<HeadingTrig>,
 }
 
 #[derive(Debug, Clone)]
@@ -297,6 +302,7 @@ impl Fleet {
             track_id: track_id as usize,
             controller,
             params,
+            next_trig: None,
         };
         let slot = match self.slots.iter().position(Option::is_none) {
             Some(i) => {
@@ -604,28 +610,29 @@ impl<'a> Columns<'a> {
         )
     }
 
-    /// Entry `j` of every column from `row`.
+    /// Entry `j` of every column from a vehicle's step: its outputs `o`
+    /// and, with a time step, its next state (a vehicle whose step failed
+    /// is not written: the columns start as `false` and NaN).
     #[inline]
-    fn write(&mut self, j: usize, row: &Row) {
-        self.ok[j] = row.ok;
+    fn write(&mut self, j: usize, o: &ControlOutput, next: Option<&VehicleState>) {
+        self.ok[j] = true;
         let vals = [
-            row.steering_rad,
-            row.accel_mps2,
-            row.alpha,
-            row.lateral_error_m,
-            row.heading_error_rad,
-            row.s_m,
-            row.s_rear_m,
-            row.lateral_error_rear_m,
-            row.lateral_error_front_m,
-            row.curvature_per_m,
-            row.virtual_obstacle_m,
+            o.steering_rad,
+            o.accel_mps2,
+            o.alpha,
+            o.lateral_error_m,
+            o.heading_error_rad,
+            o.s_m,
+            o.s_rear_m,
+            o.lateral_error_rear_m,
+            o.lateral_error_front_m,
+            o.curvature_per_m,
+            o.virtual_obstacle_m,
         ];
         for (c, v) in self.f.iter_mut().zip(vals) {
             c[j] = v;
         }
-        if !self.next[0].is_empty() {
-            let n = &row.next;
+        if let Some(n) = next {
             let vals = [n.x_m, n.y_m, n.theta_rad, n.v_mps, n.delta_rad];
             for (c, v) in self.next.iter_mut().zip(vals) {
                 c[j] = v;
@@ -645,7 +652,9 @@ fn step_range(
 ) {
     if !parallel || entries.len() <= PARALLEL_GRAIN {
         for (j, e) in entries.iter_mut().enumerate() {
-            cols.write(j, &step_one(e, inp, base + j));
+            if let Some((o, next)) = step_one(e, inp, base + j) {
+                cols.write(j, &o, next.as_ref());
+            }
         }
         return;
     }
@@ -662,53 +671,14 @@ fn step_range(
 const PARALLEL_MIN_VEHICLES: usize = 1024;
 const MAX_THREADS: usize = 8;
 
-/// One vehicle's outputs.
-#[derive(Debug, Clone, Copy)]
-struct Row {
-    ok: bool,
-    steering_rad: f64,
-    accel_mps2: f64,
-    alpha: f64,
-    lateral_error_m: f64,
-    heading_error_rad: f64,
-    s_m: f64,
-    s_rear_m: f64,
-    lateral_error_rear_m: f64,
-    lateral_error_front_m: f64,
-    curvature_per_m: f64,
-    virtual_obstacle_m: f64,
-    next: VehicleState,
-}
-
-impl Default for Row {
-    fn default() -> Self {
-        let nan = f64::NAN;
-        Row {
-            ok: false,
-            steering_rad: nan,
-            accel_mps2: nan,
-            alpha: nan,
-            lateral_error_m: nan,
-            heading_error_rad: nan,
-            s_m: nan,
-            s_rear_m: nan,
-            lateral_error_rear_m: nan,
-            lateral_error_front_m: nan,
-            curvature_per_m: nan,
-            virtual_obstacle_m: nan,
-            next: VehicleState {
-                x_m: nan,
-                y_m: nan,
-                theta_rad: nan,
-                v_mps: nan,
-                delta_rad: nan,
-            },
-        }
-    }
-}
-
-/// Steps entry `e` with input row `i`; an unusable input gives the NaN row.
-fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
+/// Steps entry `e` with input row `i`: its outputs and, with a time step,
+/// its next state; None for an unusable input (its row stays NaN).
+#[inline(always)]
+fn step_one(
+    e: &mut Entry,
+    inp: &FleetInputs<'_>,
+    i: usize,
+) -> Option<(ControlOutput, Option<VehicleState>)> {
     let opt = |c: Option<&[f64]>| c.map_or(f64::NAN, |c| c[i]);
     let state = VehicleState {
         x_m: inp.x_m[i],
@@ -747,47 +717,32 @@ fn step_one(e: &mut Entry, inp: &FleetInputs<'_>, i: usize) -> Row {
     } else {
         None
     };
-    // The heading's (cos, sin), for the controller and the integration alike.
-    let h = state.heading_vec();
+    // The heading's (cos, sin), for the controller and the integration
+    // alike (the last step's when it integrated this very heading).
+    let h = HeadingTrig::heading_vec(e.next_trig, state.theta_rad);
     let Ok(o) = e
         .controller
         .step_limited_along(&state, h, alpha, &obstacles[..n_obs], limit)
     else {
-        return Row::default();
+        return None;
     };
-    let next = match inp.dt_s {
+    let next = inp.dt_s.map(|dt| {
         // A vehicle without delay, as Vehicle::step moves it.
-        Some(dt) => {
-            advance(
-                &state,
-                &e.params,
-                e.controller.config().direction,
-                Command {
-                    steering_rad: o.steering_rad,
-                    accel_mps2: o.accel_mps2,
-                },
-                dt,
-                || (h.y, h.x),
-            )
-            .0
-        }
-        None => Row::default().next,
-    };
-    Row {
-        ok: true,
-        steering_rad: o.steering_rad,
-        accel_mps2: o.accel_mps2,
-        alpha: o.alpha,
-        lateral_error_m: o.lateral_error_m,
-        heading_error_rad: o.heading_error_rad,
-        s_m: o.s_m,
-        s_rear_m: o.s_rear_m,
-        lateral_error_rear_m: o.lateral_error_rear_m,
-        lateral_error_front_m: o.lateral_error_front_m,
-        curvature_per_m: o.curvature_per_m,
-        virtual_obstacle_m: o.virtual_obstacle_m,
-        next,
-    }
+        let (next, _, trig) = advance(
+            &state,
+            &e.params,
+            e.controller.config().direction,
+            Command {
+                steering_rad: o.steering_rad,
+                accel_mps2: o.accel_mps2,
+            },
+            dt,
+            || (h.y, h.x),
+        );
+        e.next_trig = trig;
+        next
+    });
+    Some((o, next))
 }
 
 #[cfg(test)]

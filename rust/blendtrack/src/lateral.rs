@@ -203,13 +203,28 @@ pub fn stanley_command(front: &Projection, m: &Travel, g: &LateralGains) -> f64 
 /// Curvature-based command at the rear axle for either direction.
 #[inline]
 pub fn rear_command(path: &Path, rear: &Projection, m: &Travel, g: &LateralGains) -> f64 {
+    rear_command_from(path, rear, m, g, usize::MAX).0
+}
+
+/// [`rear_command`] with a guess of the segment holding the look-ahead
+/// point `rear.s + L` (any value; the last step's saves the look-up), and
+/// that point's segment.
+#[inline(always)]
+pub(crate) fn rear_command_from(
+    path: &Path,
+    rear: &Projection,
+    m: &Travel,
+    g: &LateralGains,
+    lookahead_segment: usize,
+) -> (f64, usize) {
     let (th, e_theta) = m.heading_and_error(rear);
     let d = g.target_distance(m.speed_abs);
     let l = g.curvature_lookahead(m.speed_abs);
-    let dtheta = wrap_angle(path.heading_at(rear.s + l) - th);
+    let (ahead, segment) = path.heading_and_segment_at_from(rear.s + l, lookahead_segment);
+    let dtheta = wrap_angle(ahead - th);
     let law = rear_first_term(g.wheelbase_m, rear.lateral_m, e_theta, d)
         + rear_second_term(g.wheelbase_m, dtheta, l);
-    m.direction.sign() * law
+    (m.direction.sign() * law, segment)
 }
 
 /// Pure pursuit at the rear axle toward the path point `l_d` ahead of the foot.
@@ -220,13 +235,27 @@ pub fn pure_pursuit_command(
     m: &Travel,
     g: &LateralGains,
 ) -> f64 {
+    pure_pursuit_command_from(path, rear_xy, rear, m, g, usize::MAX).0
+}
+
+/// [`pure_pursuit_command`] with a guess of the segment holding the target
+/// point `rear.s + l_d` (as [`rear_command_from`]), and that point's segment.
+#[inline(always)]
+pub(crate) fn pure_pursuit_command_from(
+    path: &Path,
+    rear_xy: (f64, f64),
+    rear: &Projection,
+    m: &Travel,
+    g: &LateralGains,
+    lookahead_segment: usize,
+) -> (f64, usize) {
     let th = travel_heading(m.theta_rad, m.direction);
     let ld = g.cfg.pure_pursuit_gain_s * m.speed_abs + g.cfg.pure_pursuit_min_lookahead_m;
-    let t = path.point_at(rear.s + ld);
+    let (t, segment) = path.point_and_segment_at_from(rear.s + ld, lookahead_segment);
     let (dx, dy) = (t.x - rear_xy.0, t.y - rear_xy.1);
     let (s, c) = th.sin_cos();
     let law = pursuit_steering(g.wheelbase_m, c * dx + s * dy, -s * dx + c * dy);
-    m.direction.sign() * law
+    (m.direction.sign() * law, segment)
 }
 
 /// The paper's blend (eq. 4).
@@ -533,7 +562,7 @@ mod tests {
         let rear = (50.0, 1.0);
         let pr = path.project(&nalgebra::Point2::new(rear.0, rear.1));
         let d = pure_pursuit_command(&path, rear, &pr, &travel(0.0, 10.0, Direction::Forward), &g);
-        let expected = (2.0 * 2.6 * -1.0 / 50.0f64).atan();
+        let expected = (-(2.0 * 2.6) / 50.0f64).atan();
         assert!((d - expected).abs() < 1e-12, "{d} vs {expected}");
     }
 

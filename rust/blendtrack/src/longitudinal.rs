@@ -98,8 +98,23 @@ impl Obstacle {
 #[inline]
 pub fn free_flow_accel(speed_abs: f64, cfg: &ControllerConfig) -> f64 {
     let a = cfg.preferred_acceleration
-        * (1.0 - (speed_abs / cfg.preferred_speed).powf(cfg.acceleration_exp));
+        * (1.0 - ratio_pow(speed_abs / cfg.preferred_speed, cfg.acceleration_exp));
     a.max(cfg.deceleration_factor * cfg.preferred_deceleration)
+}
+
+/// `x.powf(y)`, without the call where its value is exact and known: 1 at
+/// `x = 1` (for every `y`, NaN too: C's `pow`), +0 at `x = +0` for `y > 0`.
+/// A vehicle cruising at its preferred speed (the free-flow law's fixed
+/// point) or standing still hits these.
+#[inline]
+fn ratio_pow(x: f64, y: f64) -> f64 {
+    if x == 1.0 {
+        1.0
+    } else if x == 0.0 && x.is_sign_positive() && y > 0.0 {
+        0.0
+    } else {
+        x.powf(y)
+    }
 }
 
 /// The reaction-time stopping law (the larger root): the acceleration that,
@@ -321,6 +336,9 @@ const STRIP_MAX_COORDINATE_M: f64 = 1e10;
 
 /// Segments per run (strip) of a border.
 const RUN_SEGMENTS: usize = 8;
+
+/// Steps [`Border::vertex_holding_from`] walks from its guess before it looks up.
+const VERTEX_WALK_STEPS: usize = 4;
 
 /// A ray `o + t u` with what its strip tests need, computed once per ray cast.
 struct Ray<'a> {
@@ -551,6 +569,29 @@ impl Border {
         s.partition_point(|&v| v <= at).saturating_sub(1)
     }
 
+    /// [`Self::vertex_holding`] by a walk of a few steps from `hint` (the
+    /// answer near there, e.g. the last ray cast's), else (a hint out of
+    /// range or too far off) by the look-up: the same vertex either way.
+    #[inline(always)]
+    fn vertex_holding_from(&self, at: f64, hint: usize) -> usize {
+        let s = &self.s[..];
+        // `at >= s[0]` is also false for a NaN `at` (vertex_holding gives 0).
+        if hint < s.len() && at >= s[0] {
+            let mut k = hint;
+            for _ in 0..VERTEX_WALK_STEPS {
+                if s[k] > at {
+                    // s[0] <= at: k > 0 here.
+                    k -= 1;
+                } else if k + 1 < s.len() && s[k + 1] <= at {
+                    k += 1;
+                } else {
+                    return k;
+                }
+            }
+        }
+        self.vertex_holding(at)
+    }
+
     /// Ray parameter at which the ray leaves the corridor through segment `k`.
     #[inline]
     fn exit(&self, k: usize, u: &Vector2<f64>, o: &Point2<f64>) -> Option<f64> {
@@ -636,15 +677,27 @@ impl Border {
     /// checked against the stop (within a run the ends grow, so the scan
     /// stops after the run if and only if it would have stopped within
     /// it); in the other runs a segment costs its test and one comparison.
-    fn first_exit(&self, ray: &Ray, start_s: f64, scan_m: f64, slack_m: f64) -> f64 {
-        let (u, o) = (ray.u, ray.o);
+    ///
+    /// `start_hint`: a guess of the vertex holding `start_s` (any value),
+    /// set to that vertex.
+    #[inline(always)]
+    fn first_exit(
+        &self,
+        ray: &Ray,
+        start_s: f64,
+        scan_m: f64,
+        slack_m: f64,
+        start_hint: &mut usize,
+    ) -> f64 {
         let segs = &self.segs[..];
         let n_seg = segs.len();
         if n_seg == 0 {
             return f64::INFINITY;
         }
         // Segment holding start_s.
-        let mut k = self.vertex_holding(start_s).min(n_seg - 1);
+        let start = self.vertex_holding_from(start_s, *start_hint);
+        *start_hint = start;
+        let k = start.min(n_seg - 1);
         let mut scan = Scan {
             best: f64::INFINITY,
             stop: 0.0,
@@ -655,58 +708,73 @@ impl Border {
         };
         scan.update_stop();
         let strips = &self.strips[..];
-        let mut r = k / RUN_SEGMENTS;
+        let n_runs = strips.len();
+        let r0 = k / RUN_SEGMENTS;
+        let (mut r, mut from) = (r0, k);
         // The side of the current run's first vertex (the last run's `p1`).
-        let mut s0 = ray.side(&segs[r * RUN_SEGMENTS].a);
-        // Segments not yet visited (each is visited at most once).
-        let mut left = n_seg;
-        loop {
+        let mut s0 = ray.side(&segs[r0 * RUN_SEGMENTS].a);
+        // Each segment is visited at most once: run r0 from segment k on,
+        // then whole runs, on a closed border round to the run before r0,
+        // and last the part of run r0 before k (if any).
+        let visits = if self.closed { n_runs } else { n_runs - r0 };
+        for _ in 0..visits {
             let strip = &strips[r];
-            let run_end = ((r + 1) * RUN_SEGMENTS).min(n_seg);
-            let end = run_end.min(k + left);
-            left -= end - k;
+            let end = ((r + 1) * RUN_SEGMENTS).min(n_seg);
             let s1 = ray.side(&strip.p1);
-            if ray.misses_strip(s0, s1, strip.half_width) {
-                let end_s = if end == run_end {
-                    strip.end_s
-                } else {
-                    segs[end - 1].end_s
-                };
-                let mut scanned = end_s - start_s;
-                if self.closed && scanned < 0.0 {
-                    scanned += self.path_length;
-                }
-                if scanned > scan.stop {
-                    break;
-                }
-            } else {
-                let run = &segs[k..end];
-                // Within a run the end arc lengths grow: if the first is not
-                // behind start_s, none is and no wrap-around correction applies.
-                let stopped = if self.closed && run[0].end_s - start_s < 0.0 {
-                    self.scan_run::<true>(run, &mut scan, u, o)
-                } else {
-                    self.scan_run::<false>(run, &mut scan, u, o)
-                };
-                if stopped {
-                    break;
-                }
-            }
-            if left == 0 {
-                break;
+            if self.visit_stops(ray, &mut scan, s0, s1, strip, from..end, strip.end_s) {
+                return scan.best;
             }
             s0 = s1;
-            k = end;
             r += 1;
-            if k >= n_seg {
-                if !self.closed {
-                    break;
-                }
-                k = 0;
+            if r == n_runs {
                 r = 0;
             }
+            from = r * RUN_SEGMENTS;
+        }
+        if self.closed && k > r0 * RUN_SEGMENTS {
+            let strip = &strips[r0];
+            let s1 = ray.side(&strip.p1);
+            let end_s = segs[k - 1].end_s;
+            self.visit_stops(ray, &mut scan, s0, s1, strip, r0 * RUN_SEGMENTS..k, end_s);
         }
         scan.best
+    }
+
+    /// One run's part `range` in [`Self::first_exit`]: skipped if the ray
+    /// passes its strip clear (given the sides `s0`, `s1` of the strip's
+    /// chord ends), the scan then stopping if the arc length to `end_s`
+    /// (the part's last segment's end) is beyond the stop, else each
+    /// segment tested ([`Self::scan_run`]). True once the scan is to stop.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn visit_stops(
+        &self,
+        ray: &Ray,
+        scan: &mut Scan,
+        s0: f64,
+        s1: f64,
+        strip: &Strip,
+        range: std::ops::Range<usize>,
+        end_s: f64,
+    ) -> bool {
+        if ray.misses_strip(s0, s1, strip.half_width) {
+            // `scanned > stop` with `scanned` as in scan_run (the path
+            // length added on a closed border when negative), testing the
+            // common case first: a negative `scanned` above the stop is
+            // above it also with the (positive) length added.
+            let scanned = end_s - scan.start_s;
+            scanned > scan.stop
+                || (self.closed && scanned < 0.0 && scanned + self.path_length > scan.stop)
+        } else {
+            let run = &self.segs[range];
+            // Within a run the end arc lengths grow: if the first is not
+            // behind start_s, none is and no wrap-around correction applies.
+            if self.closed && run[0].end_s - scan.start_s < 0.0 {
+                self.scan_run::<true>(run, scan, ray.u, ray.o)
+            } else {
+                self.scan_run::<false>(run, scan, ray.u, ray.o)
+            }
+        }
     }
 
     /// Tests the segments of `run` in turn (see [`Self::first_exit`]);
@@ -881,6 +949,22 @@ impl Corridor {
         s_origin: f64,
         horizon_m: f64,
     ) -> Option<f64> {
+        self.ray_cast_along_from(path, origin, u, s_origin, horizon_m, &mut [usize::MAX; 2])
+    }
+
+    /// [`Self::ray_cast_along`] with guesses of the (left, right) border
+    /// vertices where the scans start (any values; the last ray cast's
+    /// nearby save the look-ups), set to those vertices.
+    #[inline]
+    pub(crate) fn ray_cast_along_from(
+        &self,
+        path: &Path,
+        origin: &Point2<f64>,
+        u: &Vector2<f64>,
+        s_origin: f64,
+        horizon_m: f64,
+        start_hints: &mut [usize; 2],
+    ) -> Option<f64> {
         let back = self.max_width_m + 1.0;
         let start_s = if path.is_closed() {
             path.wrap_s(s_origin - back)
@@ -890,10 +974,14 @@ impl Corridor {
         let scan = back + horizon_m;
         let slack = back + 2.0 * self.max_width_m + 5.0;
         let ray = Ray::new(origin, u);
+        let [left_hint, right_hint] = start_hints;
         let best = self
             .left_simple
-            .first_exit(&ray, start_s, scan, slack)
-            .min(self.right_simple.first_exit(&ray, start_s, scan, slack));
+            .first_exit(&ray, start_s, scan, slack, left_hint)
+            .min(
+                self.right_simple
+                    .first_exit(&ray, start_s, scan, slack, right_hint),
+            );
         if best.is_finite() {
             Some(best)
         } else {
@@ -1070,6 +1158,41 @@ mod tests {
             cfg.max_deceleration,
             cfg.max_obs_deceleration,
         )
+    }
+
+    #[test]
+    fn ratio_pow_is_powf_bit_for_bit() {
+        let xs = [
+            0.0,
+            -0.0,
+            1.0,
+            1.0 - 1e-16,
+            1.0 + 2e-16,
+            0.5,
+            1.5,
+            5e-324,
+            f64::NAN,
+            f64::INFINITY,
+        ];
+        let ys = [
+            3.0,
+            4.0,
+            2.5,
+            1.0,
+            0.5,
+            1e-300,
+            0.0,
+            -1.0,
+            -3.0,
+            f64::NAN,
+            f64::INFINITY,
+        ];
+        for x in xs {
+            for y in ys {
+                let (got, want) = (ratio_pow(x, y), x.powf(y));
+                assert!(got.to_bits() == want.to_bits(), "{x}^{y}: {got} vs {want}");
+            }
+        }
     }
 
     #[test]
@@ -1455,7 +1578,15 @@ mod tests {
                     let ray = Ray::new(&o, &u);
                     for b in [&cor.left_simple, &cor.right_simple] {
                         let want = plain_first_exit(b, &u, &o, start_s, scan_m, slack_m);
-                        let got = b.first_exit(&ray, start_s, scan_m, slack_m);
+                        // Guesses of the start vertex: none, anywhere, near it.
+                        let at = b.vertex_holding(start_s);
+                        let mut hint = match (3.0 * rnd()) as u32 {
+                            0 => usize::MAX,
+                            1 => (rnd() * b.s.len() as f64) as usize,
+                            _ => (at + (9.0 * rnd()) as usize).saturating_sub(4),
+                        };
+                        let got = b.first_exit(&ray, start_s, scan_m, slack_m, &mut hint);
+                        assert_eq!(hint, at, "start {start_s}");
                         assert_eq!(
                             got.to_bits(),
                             want.to_bits(),

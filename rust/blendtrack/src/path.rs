@@ -122,10 +122,12 @@ struct Seg {
     len: f64,
     /// Arc length at the start (`s[k]`).
     s0: f64,
-    /// Vertex headings (tangents, bisecting the adjacent segments) at the
-    /// start and the end of the segment.
+    /// Vertex heading (tangent, bisecting the adjacent segments) at the
+    /// start of the segment, and the wrapped turn to the one at its end:
+    /// `wrap_angle(h1 - h0)`, which every heading look-up on the segment
+    /// needs.
     h0: f64,
-    h1: f64,
+    dh: f64,
 }
 
 impl Path {
@@ -197,7 +199,7 @@ impl Path {
                 len: seg_len[k],
                 s0: s[k],
                 h0: vertex_heading[k],
-                h1: vertex_heading[(k + 1) % n],
+                dh: wrap_angle(vertex_heading[(k + 1) % n] - vertex_heading[k]),
             })
             .collect();
         Ok(Path {
@@ -578,9 +580,8 @@ impl Path {
     #[inline(always)]
     fn seg_heading(&self, k: usize, offset: f64) -> f64 {
         let g = &self.segs[k];
-        let (a, b) = (g.h0, g.h1);
         let u = (offset / g.len).clamp(0.0, 1.0);
-        wrap_angle(a + u * wrap_angle(b - a))
+        wrap_angle(g.h0 + u * g.dh)
     }
 
     /// Index of the segment holding arc length `s`.
@@ -606,6 +607,26 @@ impl Path {
     pub fn heading_at_from(&self, s: f64, segment_hint: usize) -> f64 {
         let (k, off) = self.locate_from(s, segment_hint);
         self.seg_heading(k, off)
+    }
+
+    /// [`Self::heading_at_from`] and the segment holding `s` (the guess for
+    /// the next look-up near there).
+    #[inline]
+    pub(crate) fn heading_and_segment_at_from(&self, s: f64, segment_hint: usize) -> (f64, usize) {
+        let (k, off) = self.locate_from(s, segment_hint);
+        (self.seg_heading(k, off), k)
+    }
+
+    /// [`Self::point_at`] with a guess of the segment holding `s` (as
+    /// [`Self::heading_at_from`]), and the segment holding `s`.
+    #[inline]
+    pub(crate) fn point_and_segment_at_from(
+        &self,
+        s: f64,
+        segment_hint: usize,
+    ) -> (Point2<f64>, usize) {
+        let (k, off) = self.locate_from(s, segment_hint);
+        (self.points[k] + self.seg_dir[k] * off, k)
     }
 
     /// Unit tangent at arc length `s`.
@@ -692,7 +713,7 @@ impl Path {
     }
 
     /// A projection without the curvature (left at NaN), for callers that do not need it.
-    #[inline]
+    #[inline(always)]
     fn make_projection_flat(&self, p: &Point2<f64>, k: usize, t: f64, dist2: f64) -> Projection {
         let g = &self.segs[k];
         let foot = g.a + g.dir * t;
@@ -845,6 +866,7 @@ impl Path {
         (self.foot_s(k, t), k)
     }
 
+    #[inline(always)]
     fn nearest_near(&self, p: &Point2<f64>, hint_s: f64, segment_hint: usize) -> (f64, usize, f64) {
         let Some(bound) = self.hint_bound(hint_s) else {
             return self.nearest_full(p);
@@ -988,6 +1010,7 @@ impl Path {
     /// From segment `k`, on along `advance` while the next segment is nearer
     /// to `p` than `best` (which it updates), at most `budget` segments.
     /// Returns how many segments it moved.
+    #[inline(always)]
     fn descend(
         &self,
         p: &Point2<f64>,

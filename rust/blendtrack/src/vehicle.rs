@@ -103,6 +103,26 @@ pub fn integrate_pose(
     )
 }
 
+/// An angle with its sine and cosine (`theta_rad.sin()`, `theta_rad.cos()`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct HeadingTrig {
+    pub theta_rad: f64,
+    pub sin: f64,
+    pub cos: f64,
+}
+
+impl HeadingTrig {
+    /// `(cos, sin)` of `theta_rad` ([`VehicleState::heading_vec`]): these
+    /// if `trig` is of that very angle (the same bits), else computed.
+    #[inline]
+    pub fn heading_vec(trig: Option<HeadingTrig>, theta_rad: f64) -> Vector2<f64> {
+        match trig {
+            Some(t) if t.theta_rad.to_bits() == theta_rad.to_bits() => Vector2::new(t.cos, t.sin),
+            _ => Vector2::new(theta_rad.cos(), theta_rad.sin()),
+        }
+    }
+}
+
 /// [`integrate_pose`] for a caller that has `(theta.sin(), theta.cos())`
 /// already (`sin_cos` gives them, asked only on an arc): the same doubles.
 #[inline]
@@ -117,24 +137,53 @@ pub(crate) fn integrate_pose_with(
     wheelbase_m: f64,
     dt: f64,
 ) -> (f64, f64, f64) {
+    integrate_pose_trig(x, y, theta, sin_cos, v, delta, wheelbase_m, dt).0
+}
+
+/// [`integrate_pose_with`], and on an arc the sine and cosine it took of
+/// the end heading before wrapping it (the next step's heading, when the
+/// wrap leaves it as it is).
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn integrate_pose_trig(
+    x: f64,
+    y: f64,
+    theta: f64,
+    sin_cos: impl FnOnce() -> (f64, f64),
+    v: f64,
+    delta: f64,
+    wheelbase_m: f64,
+    dt: f64,
+) -> ((f64, f64, f64), Option<HeadingTrig>) {
     let omega = v * delta.tan() / wheelbase_m;
     let dth = omega * dt;
     if dth.abs() < 1e-9 {
         // Second-order expansion of the arc: exact to O(dth^2) which is ~1e-18 here.
         let th_mid = theta + 0.5 * dth;
         (
-            x + v * dt * th_mid.cos(),
-            y + v * dt * th_mid.sin(),
-            wrap_angle(theta + dth),
+            (
+                x + v * dt * th_mid.cos(),
+                y + v * dt * th_mid.sin(),
+                wrap_angle(theta + dth),
+            ),
+            None,
         )
     } else {
         let r = v / omega;
         let th1 = theta + dth;
         let (sin_theta, cos_theta) = sin_cos();
+        let (sin1, cos1) = (th1.sin(), th1.cos());
         (
-            x + r * (th1.sin() - sin_theta),
-            y - r * (th1.cos() - cos_theta),
-            wrap_angle(th1),
+            (
+                x + r * (sin1 - sin_theta),
+                y - r * (cos1 - cos_theta),
+                wrap_angle(th1),
+            ),
+            Some(HeadingTrig {
+                theta_rad: th1,
+                sin: sin1,
+                cos: cos1,
+            }),
         )
     }
 }
@@ -142,7 +191,9 @@ pub(crate) fn integrate_pose_with(
 /// One step of a vehicle without delay (what [`Vehicle::step`] does with
 /// the command it applies): the actuators move toward `cmd` within their
 /// limits, then the pose is integrated. Returns the next state and the
-/// acceleration applied along travel. `sin_cos`: as [`integrate_pose_with`].
+/// acceleration applied along travel, and the end heading's sine and
+/// cosine when it has them ([`integrate_pose_trig`]). `sin_cos`: as
+/// [`integrate_pose_with`].
 #[inline]
 pub(crate) fn advance(
     state: &VehicleState,
@@ -151,7 +202,7 @@ pub(crate) fn advance(
     cmd: Command,
     dt: f64,
     sin_cos: impl FnOnce() -> (f64, f64),
-) -> (VehicleState, f64) {
+) -> (VehicleState, f64, Option<HeadingTrig>) {
     let dmax = p.max_steering_rad();
     let rate = p.max_steering_rate_rad_s() * dt;
     let target = if cmd.steering_rad.is_finite() {
@@ -172,7 +223,7 @@ pub(crate) fn advance(
     let v_new = (v_travel + a * dt).clamp(0.0, p.max_speed_mps);
     let applied = (v_new - v_travel) / dt;
     let v = v_new * sgn;
-    let (x, y, th) = integrate_pose_with(
+    let ((x, y, th), trig) = integrate_pose_trig(
         state.x_m,
         state.y_m,
         state.theta_rad,
@@ -191,6 +242,7 @@ pub(crate) fn advance(
             delta_rad: delta,
         },
         applied,
+        trig,
     )
 }
 
@@ -437,9 +489,10 @@ impl Vehicle {
             }
         };
         let theta = self.state.theta_rad;
-        let (state, applied) = advance(&self.state, &self.params, self.direction, cmd, dt, || {
-            (theta.sin(), theta.cos())
-        });
+        let (state, applied, _) =
+            advance(&self.state, &self.params, self.direction, cmd, dt, || {
+                (theta.sin(), theta.cos())
+            });
         self.state = state;
         self.applied_accel_mps2 = applied;
     }
@@ -449,6 +502,46 @@ impl Vehicle {
 mod tests {
     use super::*;
     use std::f64::consts::PI;
+
+    #[test]
+    fn the_end_headings_sine_and_cosine_are_the_next_states_heading_vec() {
+        let mut reused = 0;
+        for i in 0..20_000 {
+            let f = i as f64;
+            let theta = (f * 0.618_033_988_7).fract() * 7.0 - 3.5;
+            let delta = ((f * 0.414_213_562).fract() - 0.5) * 0.8;
+            let v = ((f * 0.732_050_807).fract() - 0.3) * 40.0;
+            let st = VehicleState {
+                x_m: 3.0,
+                y_m: -2.0,
+                theta_rad: theta,
+                v_mps: v,
+                delta_rad: delta,
+            };
+            let (x, y, th) = integrate_pose(3.0, -2.0, theta, v, delta, 2.7, 0.1);
+            let ((x2, y2, th2), trig) =
+                integrate_pose_trig(3.0, -2.0, theta, || theta.sin_cos(), v, delta, 2.7, 0.1);
+            assert_eq!(
+                [x, y, th].map(f64::to_bits),
+                [x2, y2, th2].map(f64::to_bits)
+            );
+            let next = VehicleState {
+                theta_rad: th,
+                ..st
+            };
+            let h = HeadingTrig::heading_vec(trig, th);
+            assert_eq!(
+                [h.x.to_bits(), h.y.to_bits()],
+                [
+                    next.heading_vec().x.to_bits(),
+                    next.heading_vec().y.to_bits()
+                ],
+                "theta {theta} v {v} delta {delta}"
+            );
+            reused += trig.is_some_and(|t| t.theta_rad == th) as usize;
+        }
+        assert!(reused > 10_000, "{reused}");
+    }
 
     #[test]
     fn noise_models_with_a_negative_nan_or_zero_interval_are_invalid() {
