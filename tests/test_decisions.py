@@ -55,6 +55,15 @@ class FakeVehicle:
     def getMinGap(self, vid: str) -> float:
         return self.cars[vid]["min_gap"]
 
+    def getAccel(self, vid: str) -> float:
+        return self.cars[vid].get("accel", 2.6)
+
+    def getDecel(self, vid: str) -> float:
+        return self.cars[vid].get("decel", 4.5)
+
+    def getImpatience(self, vid: str) -> float:
+        return self.cars[vid].get("impatience", 0.0)
+
     def getLaneID(self, vid: str) -> str:
         return self.cars[vid]["lane"]
 
@@ -99,6 +108,7 @@ class FakeConn:
         )
         self.tc = tc
         self.errors = KeyError
+        self.dt = 1.0
 
     def vehicles_on(self, lane: str) -> list[str]:
         return self.lanes.get(lane, [])
@@ -470,10 +480,74 @@ def test_wait_for_gap_lines_up_behind_the_tighter_neighbour() -> None:
 
 
 # ------------------------------------------------------------ junctions
-def junctions(conn: FakeConn, foes: list[tuple[Any, ...]], plan_decel: float = 4.0) -> Junctions:
+def junctions(conn: FakeConn, foes: list[tuple[Any, ...]], plan_decel: float = 4.0,
+              crossing: tuple[float, float] | None = None) -> Junctions:
+    """Junctions on a fake network: ``foes`` the internal foes of every
+    lane, ``crossing`` where every two ways cross (None: they do not)."""
     network = SimpleNamespace(internal_foes=lambda via: foes, internal_vias={":j_w"}, waiting_point_after=lambda via: (None, 0.0),
-                              junction_lanes=lambda via: (None, []))
+                              junction_lanes=lambda via: (None, []), crossing=lambda via, foe: crossing)
     return Junctions(conn, network, None, None, plan_decel)  # type: ignore[arg-type]
+
+
+def test_a_foe_inside_the_junction_counts_until_it_is_past_the_crossing() -> None:
+    """The ways cross 10 m into the foe's junction lane: a foe whose back
+    is 2.5 m past that has gone by; one nearer is in the way, or arrives
+    (accelerating at its accel) within the 4 s the vehicle needs; an
+    impatient vehicle lets one come that could still stop for it."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me")
+    v.add("o", pos=17.5 + 1e-3, length=5.0)
+    conn.lanes[":j_foe"] = ["o"]
+    j = junctions(conn, [(":j_foe", None, 0.0, "", -1)], crossing=(5.0, 10.0))
+    assert not j.internal_junction_busy("me", ":j_w", gap=1.0), "back 2.5 m past the crossing"
+    v.cars["o"]["pos"] = 17.5 - 1e-3
+    assert j.internal_junction_busy("me", ":j_w", gap=1.0), "its back is still near it"
+    # Standing 4.5 m before the point (its front 2.5 m short of it):
+    # arrives in sqrt(2 * 4.5 / 2.6) = 1.9 s.
+    v.cars["o"].update(pos=3.0, speed=0.0)
+    assert j.internal_junction_busy("me", ":j_w", gap=1.0)
+    assert j.internal_junction_busy("me", ":j_w", horizon_s=1.8) is False
+    # Impatient (0.1 x 30 s = 3 s later: 4.9 s >= 4 s): it goes, the foe
+    # standing 2 m more than its minGap short of the point.
+    v.cars["me"]["impatience"] = 0.1
+    assert not j.internal_junction_busy("me", ":j_w", gap=1.0)
+    assert j.internal_junction_busy("me", ":j_w"), "no gap given: no impatience"
+    # Moving at 5 m/s it could not stop: it drives on 2 s (the two steps the
+    # vehicle, 1 m before its line, needs to get over it), 10 m.
+    v.cars["o"]["speed"] = 5.0
+    j.went.clear()
+    assert j.internal_junction_busy("me", ":j_w", gap=1.0)
+
+
+def test_an_impatient_vehicle_lets_a_foe_come_that_could_stop_and_keeps_its_impatience() -> None:
+    """At an internal waiting point, 4 s of horizon: a foe at 8 m/s 31 m
+    from its line arrives in 3.9 s. Patient, the vehicle waits; with an
+    impatience of 0.1 (3 s) it goes, the foe able to stop (2 s at 8 m/s,
+    16 m, then 7.1 m braking at 4.5 m/s^2, within 31 m less its minGap).
+    Moving, SUMO's impatience is 0 again: the one it went with holds for
+    this waiting point until its front is over the line."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me")
+    v.add("o", pos=19.0, speed=8.0)
+    conn.lanes["in_0"] = ["o"]
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "", -1)])
+    assert j.internal_junction_busy("me", ":j_w", gap=1.0)
+    v.cars["me"]["impatience"] = 0.1
+    assert not j.internal_junction_busy("me", ":j_w", gap=1.0)
+    assert j.went == {"me": (":j_w", 0.1)}
+    v.cars["me"]["impatience"] = 0.0
+    assert not j.internal_junction_busy("me", ":j_w", gap=1.0)
+    j.went["me"] = (":j_other", 0.1)
+    assert j.internal_junction_busy("me", ":j_w", gap=1.0), "kept for another point only"
+    # A foe that could not stop counts however impatient: at 12 m/s, 24 m
+    # in 2 s and 16 m braking, more than its 31 m less its minGap.
+    v.cars["me"]["impatience"] = 1.0
+    v.cars["o"]["speed"] = 12.0
+    assert j.internal_junction_busy("me", ":j_w", gap=1.0)
+    j.forget("me")
+    assert "me" not in j.went
 
 
 def test_internal_junction_busy_with_a_foe_inside_or_near() -> None:
@@ -600,7 +674,7 @@ def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tup
                               is_zipper=lambda v: False, link_state=lambda v: "")
     j = Junctions(conn, network, tracks, fleet, 4.0)  # type: ignore[arg-type]
 
-    def busy(vid: str, lane: str, horizon_s: float = jn.INTERNAL_YIELD_S) -> bool:
+    def busy(vid: str, lane: str, horizon_s: float = jn.INTERNAL_YIELD_S, gap: float | None = None) -> bool:
         seen["horizon"] = horizon_s
         seen["lane"] = lane
         return bool(seen["busy"])

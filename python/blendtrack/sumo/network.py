@@ -42,6 +42,7 @@ class Network:
         self._prohibitors: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
         self._states: dict[str, str] = {}
         self._conflicts: dict[tuple[str, str], tuple[float, float]] = {}
+        self._crossings: dict[tuple[str, str], tuple[float, float] | None] = {}
         self._from_lanes: dict[str, str | None] = {}
         #: Per node (by id): each of its connections' link index (sumolib's
         #: ``Node.getLinkIndex``, which walks the node's connections anew on
@@ -331,6 +332,18 @@ class Network:
             self._conflicts[key] = hit
         return hit
 
+    def crossing(self, via: str, foe: str) -> tuple[float, float] | None:
+        """``conflict(via, foe)`` where the two ways cross, None where they
+        do not (they merge, or ``foe`` is a junction lane past the crossing)."""
+        key = (via, foe)
+        hit = self._crossings.get(key, False)
+        if hit is False:
+            path, _ = self.junction_lanes(via)
+            other, _ = self.junction_lanes(foe)
+            hit = crossing_point(path, other)
+            self._crossings[key] = hit
+        return hit
+
 
 def _arc(p: np.ndarray) -> np.ndarray:
     """Arc length at each point of the polyline ``p``."""
@@ -342,6 +355,15 @@ def _arc(p: np.ndarray) -> np.ndarray:
 def first_crossing(p: np.ndarray, q: np.ndarray) -> tuple[float, float]:
     """The arc lengths along ``p`` and along ``q`` (polylines, n x 2) of the
     first point of ``p`` where they cross; their lengths where they never do."""
+    hit = crossing_point(p, q)
+    if hit is not None:
+        return hit
+    sp, sq = _arc(p), _arc(q)
+    return float(sp[-1]) if len(sp) else 0.0, float(sq[-1]) if len(sq) else 0.0
+
+
+def crossing_point(p: np.ndarray, q: np.ndarray) -> tuple[float, float] | None:
+    """``first_crossing`` where the polylines cross, None where they never do."""
     sp, sq = _arc(p), _arc(q)
     for i in range(len(p) - 1):
         a, d = p[i], p[i + 1] - p[i]
@@ -355,4 +377,4 @@ def first_crossing(p: np.ndarray, q: np.ndarray) -> tuple[float, float]:
             u = (w[0] * d[1] - w[1] * d[0]) / den
             if 0.0 <= t <= 1.0 and 0.0 <= u <= 1.0:
                 return float(sp[i] + t * (sp[i + 1] - sp[i])), float(sq[j] + u * (sq[j + 1] - sq[j]))
-    return float(sp[-1]) if len(sp) else 0.0, float(sq[-1]) if len(sq) else 0.0
+    return None
