@@ -323,26 +323,24 @@ class Network:
         way of the foe connection whose first junction lane is ``foe``: the
         distance to that point along each (m, from the start of ``via`` and
         of ``foe``); where they never cross (they merge), the ends of both."""
-        key = (via, foe)
-        hit = self._conflicts.get(key)
-        if hit is None:
-            path, _ = self.junction_lanes(via)
-            other, _ = self.junction_lanes(foe)
-            hit = first_crossing(path, other)
-            self._conflicts[key] = hit
-        return hit
+        return self._between(self._conflicts, first_crossing, via, foe)
 
     def crossing(self, via: str, foe: str) -> tuple[float, float] | None:
         """``conflict(via, foe)`` where the two ways cross, None where they
         do not (they merge, or ``foe`` is a junction lane past the crossing)."""
+        return self._between(self._crossings, crossing_point, via, foe)
+
+    def _between(self, cache: dict[tuple[str, str], Any], measure: Any, via: str, foe: str) -> Any:
+        """``measure`` of the ways through the junction from ``via`` and from
+        ``foe`` (their paths), once per pair (kept in ``cache``)."""
         key = (via, foe)
-        hit = self._crossings.get(key, False)
-        if hit is False:
+        try:
+            return cache[key]
+        except KeyError:
             path, _ = self.junction_lanes(via)
             other, _ = self.junction_lanes(foe)
-            hit = crossing_point(path, other)
-            self._crossings[key] = hit
-        return hit
+            hit = cache[key] = measure(path, other)
+            return hit
 
 
 def _arc(p: np.ndarray) -> np.ndarray:

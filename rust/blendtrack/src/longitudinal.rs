@@ -340,6 +340,25 @@ const RUN_SEGMENTS: usize = 8;
 /// Steps [`Border::vertex_holding_from`] walks from its guess before it looks up.
 const VERTEX_WALK_STEPS: usize = 4;
 
+/// The last vertex of the sorted arc lengths `s` at or before `at` (with
+/// `s[0] <= at`), by at most `steps` steps from vertex `k` (`k < s.len()`);
+/// None when that is not enough.
+#[inline(always)]
+fn walk_to_vertex(s: &[f64], at: f64, mut k: usize, steps: usize) -> Option<usize> {
+    for _ in 0..steps {
+        if s[k] > at {
+            // s[0] <= at: k > 0 here.
+            k -= 1;
+        } else if k + 1 < s.len() && s[k + 1] <= at {
+            k += 1;
+        } else {
+            // s[k] <= at < s[k + 1] (or k is the last vertex).
+            return Some(k);
+        }
+    }
+    None
+}
+
 /// A ray `o + t u` with what its strip tests need, computed once per ray cast.
 struct Ray<'a> {
     o: &'a Point2<f64>,
@@ -553,20 +572,8 @@ impl Border {
             return 0;
         }
         let b = ((at * self.bucket_scale) as usize).min(self.bucket.len() - 1);
-        let mut k = self.bucket[b] as usize;
-        for _ in 0..8 {
-            if s[k] > at {
-                // s[0] <= at: k > 0 here.
-                k -= 1;
-            } else if k + 1 < s.len() && s[k + 1] <= at {
-                k += 1;
-            } else {
-                // s[k] <= at < s[k + 1] (or k is the last vertex): the last
-                // vertex at or before `at`, as the sorted s has one.
-                return k;
-            }
-        }
-        s.partition_point(|&v| v <= at).saturating_sub(1)
+        walk_to_vertex(s, at, self.bucket[b] as usize, 8)
+            .unwrap_or_else(|| s.partition_point(|&v| v <= at).saturating_sub(1))
     }
 
     /// [`Self::vertex_holding`] by a walk of a few steps from `hint` (the
@@ -577,16 +584,8 @@ impl Border {
         let s = &self.s[..];
         // `at >= s[0]` is also false for a NaN `at` (vertex_holding gives 0).
         if hint < s.len() && at >= s[0] {
-            let mut k = hint;
-            for _ in 0..VERTEX_WALK_STEPS {
-                if s[k] > at {
-                    // s[0] <= at: k > 0 here.
-                    k -= 1;
-                } else if k + 1 < s.len() && s[k + 1] <= at {
-                    k += 1;
-                } else {
-                    return k;
-                }
+            if let Some(k) = walk_to_vertex(s, at, hint, VERTEX_WALK_STEPS) {
+                return k;
             }
         }
         self.vertex_holding(at)
