@@ -1039,15 +1039,20 @@ def test_a_leader_past_a_fan_out_on_the_tracks_way_is_taken() -> None:
     assert j.leader_at_fanout("me", "in_1", ["elsewhere"], ("far", 40.0)) == ("far", 40.0)
 
 
-def _merge_junctions(conn: FakeConn) -> Junctions:
+def _merge_junctions(conn: FakeConn, controlled: Any = None) -> Junctions:
     """Lane "maj" (50 m) leads through ":m_0_0" (6 m) and lane "min" (40 m)
-    through ":m_1_0" (8 m) onto "out" (100 m): two ways merging."""
-    after = {":m_0_0": [(":m_0_0", 6.0), ("out", 100.0)], ":m_1_0": [(":m_1_0", 8.0), ("out", 100.0)]}
-    ways = {"out": [((":m_0_0", 6.0),), ((":m_1_0", 8.0),)]}
-    lengths = {"maj": 50.0, "min": 40.0}
+    through ":m_1_0" (8 m) onto "out" (100 m): two ways merging. Before
+    "maj", junction lane ":p_0_0" (10 m) leads onto the 0.2 m lane "short"
+    and on through ":s_0_0" (5 m) onto "maj2", where "min2" merges through
+    ":s_1_0" (7 m). ``controlled``: the vehicles blendtrack drives."""
+    after = {":m_0_0": [(":m_0_0", 6.0), ("out", 100.0)], ":m_1_0": [(":m_1_0", 8.0), ("out", 100.0)],
+             ":p_0_0": [(":p_0_0", 10.0), ("short", 0.2)], ":s_0_0": [(":s_0_0", 5.0), ("maj2", 50.0)],
+             ":s_1_0": [(":s_1_0", 7.0), ("maj2", 50.0)]}
+    ways = {"out": [((":m_0_0", 6.0),), ((":m_1_0", 8.0),)], "maj2": [((":s_0_0", 5.0),), ((":s_1_0", 7.0),)]}
+    lengths = {"maj": 50.0, "min": 40.0, "short": 0.2}
     net = SimpleNamespace(lanes_after=lambda via: after.get(via, []), ways_into=lambda lane: ways.get(lane, []),
-                          lane_length=lengths.__getitem__, lanes_into_merges=lambda: frozenset({"maj", "min"}))
-    return Junctions(conn, net, None, None, 4.0)  # type: ignore[arg-type]
+                          lane_length=lengths.__getitem__, lanes_into_merges=lambda: frozenset({"maj", "min", "short"}))
+    return Junctions(conn, net, None, None, 4.0, controlled={} if controlled is None else controlled)  # type: ignore[arg-type]
 
 
 def test_a_vehicle_merging_from_another_junction_lane_is_followed_when_it_gets_there_first() -> None:
@@ -1062,7 +1067,7 @@ def test_a_vehicle_merging_from_another_junction_lane_is_followed_when_it_gets_t
     v.add("me", lane=":m_0_0", pos=2.0, speed=1.0, min_gap=2.5)
     v.add("foe", lane=":m_1_0", pos=5.0, speed=0.5, length=5.0)
     conn.lanes = {":m_1_0": ["foe"]}
-    j = _merge_junctions(conn)
+    j = _merge_junctions(conn, controlled={"foe": None})
     track = ["maj", ":m_0_0", "out"]
     assert j.leader_at_merge("me", ":m_0_0", track, None) == ("foe", pytest.approx(4.0 - 3.0 - 5.0 - 2.5))
     assert j.leader_at_merge("me", ":m_0_0", track, ("far", 30.0)) == ("foe", pytest.approx(-6.5))
@@ -1102,6 +1107,43 @@ def test_a_vehicle_merging_from_another_junction_lane_is_followed_when_it_gets_t
     assert j.leader_at_merge("me", "maj", ["maj", ":k_0_0", "x"], None) is None
     conn.lanes = {":m_0_0": ["foe"]}
     assert j.leader_at_merge("me", "maj", track, None) is None
+
+
+def test_a_sumo_driver_about_as_near_a_merge_point_is_followed() -> None:
+    """SUMO's drivers from a minor road do not wait for a controlled vehicle
+    standing at a merge: one up to MERGE_DEFER_M (3 m) farther from the merge
+    point than the controlled vehicle is followed too. "me" on ":m_0_0" at
+    2 m is 4 m from the merge point; the SUMO driver standing on ":m_1_0" at
+    1.5 m is 6.5 m from it (followed: gap 4 - 6.5 - 5 - 2.5); at 0.5 m, 7.5 m
+    (not). A controlled vehicle at 6.5 m is not (the rule stays the same
+    from both sides)."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane=":m_0_0", pos=2.0, speed=0.0, min_gap=2.5)
+    v.add("sumo", lane=":m_1_0", pos=1.5, speed=0.0, length=5.0)
+    conn.lanes = {":m_1_0": ["sumo"]}
+    track = ["maj", ":m_0_0", "out"]
+    assert _merge_junctions(conn).leader_at_merge("me", ":m_0_0", track, None) == ("sumo", pytest.approx(-10.0))
+    assert _merge_junctions(conn, controlled={"sumo": None}).leader_at_merge("me", ":m_0_0", track, None) is None
+    v.cars["sumo"]["pos"] = 0.5
+    assert _merge_junctions(conn).leader_at_merge("me", ":m_0_0", track, None) is None
+
+
+def test_a_merge_past_a_short_lane_is_looked_at_from_the_junction_before() -> None:
+    """On ":p_0_0" at 4 m, the way goes on over the 0.2 m lane "short" and
+    ":s_0_0" (5 m) to where ":s_1_0" merges: 6 + 0.2 + 5 = 11.2 m ahead. A
+    controlled vehicle on ":s_1_0" at 3 m (4 m from the merge point) is
+    nearer: gap 11.2 - 4 - 5 - 2.5."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane=":p_0_0", pos=4.0, speed=0.0, min_gap=2.5)
+    v.add("foe", lane=":s_1_0", pos=3.0, speed=0.0, length=5.0)
+    conn.lanes = {":s_1_0": ["foe"]}
+    j = _merge_junctions(conn, controlled={"foe": None})
+    track = ["x", ":p_0_0", "short", ":s_0_0", "maj2"]
+    assert j.leader_at_merge("me", ":p_0_0", track, None) == ("foe", pytest.approx(11.2 - 4.0 - 5.0 - 2.5))
+    # A track that goes elsewhere after the short lane: nothing.
+    assert j.leader_at_merge("me", ":p_0_0", ["x", ":p_0_0", "short", ":k_0_0", "y"], None) is None
 
 
 def test_the_network_lists_the_lanes_that_fan_out(tmp_path: Path, build_net: Any) -> None:

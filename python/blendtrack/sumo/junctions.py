@@ -55,6 +55,13 @@ FOLLOW_MIN_SPEED_MPS = 2.0
 #: junction merges with others (the end of its junction lanes) looks for
 #: vehicles on the merging ways (``leader_at_merge``).
 MERGE_LOOKAHEAD_M = 30.0
+#: A vehicle SUMO drives on a merging way is followed also when it is up to
+#: this much (m) farther from the merge point than the controlled vehicle:
+#: SUMO's drivers from a minor road do not wait for a controlled vehicle
+#: that stands at or near the merge (Bologna, junction 39a: both stood, the
+#: SUMO driver 7.2 m from the merge point, the controlled vehicle about 6 m,
+#: both went).
+MERGE_DEFER_M = 3.0
 #: A vehicle inside a junction is in the way of one about to enter when its
 #: body comes within this much of the half width of the entering vehicle's
 #: path through the junction (m).
@@ -337,8 +344,10 @@ class Junctions:
                         speed = float(veh.getSpeed(vid))
                     its = rest - float(veh.getLanePosition(other))
                     other_speed = float(veh.getSpeed(other))
-                    # Nearer the merge point, or sooner there at the speeds both have now.
-                    if its >= pos and not (other_speed > 0.0 and its * speed < pos * other_speed):
+                    # Nearer the merge point (a SUMO driver: about as near),
+                    # or sooner there at the speeds both have now.
+                    near = pos + (0.0 if other in self.controlled else MERGE_DEFER_M)
+                    if its >= near and not (other_speed > 0.0 and its * speed < pos * other_speed):
                         continue
                     gap = pos - its - float(veh.getLength(other)) - float(veh.getMinGap(vid))
                     if best is not None and math.isinf(best_stop):
@@ -370,13 +379,23 @@ class Junctions:
             else:
                 edge = lane.rsplit("_", 1)[0]
                 own = next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
+            start = own
             after = self.network.lanes_after(own)
-            if len(after) < 2 or not self.network.ways_into(after[-1][0]):
+            if len(after) < 2:
                 return None
             ahead = sum(length for _, length in after[:-1])
-            if own != lane:
-                return own, after[-1][0], lambda p: ahead - self._front_on(vid, own, p)
-            return own, after[-1][0], lambda p: ahead - p
+            if not self.network.ways_into(after[-1][0]):
+                # The lane after may be a short one before the next junction
+                # (Bologna: 77cd, 0.2 m, between junctions 20c and 39a).
+                further = self._merge_beyond(after[-1][0], track_lanes, ahead)
+                if further is None:
+                    return None
+                own, target, ahead = further
+            else:
+                target = after[-1][0]
+            if start != lane:
+                return own, target, lambda p: ahead - self._front_on(vid, start, p)
+            return own, target, lambda p: ahead - p
         if lane not in self.network.lanes_into_merges():
             return None
         try:
@@ -391,6 +410,25 @@ class Junctions:
             return None
         ahead = sum(length for _, length in after[:-1]) + self.network.lane_length(lane)
         return via, after[-1][0], lambda p: ahead - p
+
+    def _merge_beyond(self, lane: str, track_lanes: list[str], ahead: float) -> tuple[str, str, float] | None:
+        """From the start of normal lane ``lane`` of the track (``ahead`` m
+        from the vehicle's lane start), the next junction lane on the track
+        if its way merges onto a lane within ``MERGE_LOOKAHEAD_M``: (that
+        junction lane, the lane it leads to, their distance from the vehicle's
+        lane start); else None."""
+        try:
+            k = track_lanes.index(lane)
+        except ValueError:
+            return None
+        if k + 1 >= len(track_lanes) or not track_lanes[k + 1].startswith(":"):
+            return None
+        via = track_lanes[k + 1]
+        after = self.network.lanes_after(via)
+        ahead += self.network.lane_length(lane) + sum(length for _, length in after[:-1])
+        if len(after) < 2 or ahead > MERGE_LOOKAHEAD_M or not self.network.ways_into(after[-1][0]):
+            return None
+        return via, after[-1][0], ahead
 
     def _front_on(self, vid: str, lane: str, fallback: float) -> float:
         """The lane position blendtrack has ``vid``'s front at on ``lane``
