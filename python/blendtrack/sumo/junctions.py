@@ -398,25 +398,19 @@ class Junctions:
             return own, target, lambda p: ahead - p
         if lane not in self.network.lanes_into_merges():
             return None
-        try:
-            k = track_lanes.index(lane)
-        except ValueError:
+        found = self._merge_beyond(lane, track_lanes, 0.0, math.inf)
+        if found is None:
             return None
-        if k + 1 >= len(track_lanes) or not track_lanes[k + 1].startswith(":"):
-            return None
-        via = track_lanes[k + 1]
-        after = self.network.lanes_after(via)
-        if len(after) < 2 or not self.network.ways_into(after[-1][0]):
-            return None
-        ahead = sum(length for _, length in after[:-1]) + self.network.lane_length(lane)
-        return via, after[-1][0], lambda p: ahead - p
+        via, target, to_end = found
+        return via, target, lambda p: to_end - p
 
-    def _merge_beyond(self, lane: str, track_lanes: list[str], ahead: float) -> tuple[str, str, float] | None:
+    def _merge_beyond(self, lane: str, track_lanes: list[str], ahead: float,
+                      limit: float = MERGE_LOOKAHEAD_M) -> tuple[str, str, float] | None:
         """From the start of normal lane ``lane`` of the track (``ahead`` m
         from the vehicle's lane start), the next junction lane on the track
-        if its way merges onto a lane within ``MERGE_LOOKAHEAD_M``: (that
-        junction lane, the lane it leads to, their distance from the vehicle's
-        lane start); else None."""
+        if its way merges onto a lane within ``limit`` (m from the vehicle's
+        lane start): (that junction lane, the lane it leads to, their
+        distance from the vehicle's lane start); else None."""
         try:
             k = track_lanes.index(lane)
         except ValueError:
@@ -426,7 +420,7 @@ class Junctions:
         via = track_lanes[k + 1]
         after = self.network.lanes_after(via)
         ahead += self.network.lane_length(lane) + sum(length for _, length in after[:-1])
-        if len(after) < 2 or ahead > MERGE_LOOKAHEAD_M or not self.network.ways_into(after[-1][0]):
+        if len(after) < 2 or ahead > limit or not self.network.ways_into(after[-1][0]):
             return None
         return via, after[-1][0], ahead
 
