@@ -91,7 +91,7 @@ pub fn integrate_pose(
     wheelbase_m: f64,
     dt: f64,
 ) -> (f64, f64, f64) {
-    integrate_pose_with(
+    integrate_pose_trig(
         x,
         y,
         theta,
@@ -101,6 +101,7 @@ pub fn integrate_pose(
         wheelbase_m,
         dt,
     )
+    .0
 }
 
 /// An angle with its sine and cosine (`theta_rad.sin()`, `theta_rad.cos()`).
@@ -124,25 +125,9 @@ impl HeadingTrig {
 }
 
 /// [`integrate_pose`] for a caller that has `(theta.sin(), theta.cos())`
-/// already (`sin_cos` gives them, asked only on an arc): the same doubles.
-#[inline]
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn integrate_pose_with(
-    x: f64,
-    y: f64,
-    theta: f64,
-    sin_cos: impl FnOnce() -> (f64, f64),
-    v: f64,
-    delta: f64,
-    wheelbase_m: f64,
-    dt: f64,
-) -> (f64, f64, f64) {
-    integrate_pose_trig(x, y, theta, sin_cos, v, delta, wheelbase_m, dt).0
-}
-
-/// [`integrate_pose_with`], and on an arc the sine and cosine it took of
-/// the end heading before wrapping it (the next step's heading, when the
-/// wrap leaves it as it is).
+/// already (`sin_cos` gives them, asked only on an arc; the same doubles),
+/// and on an arc the sine and cosine it took of the end heading before
+/// wrapping it (the next step's heading, when the wrap leaves it as it is).
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn integrate_pose_trig(
@@ -193,7 +178,7 @@ pub(crate) fn integrate_pose_trig(
 /// limits, then the pose is integrated. Returns the next state and the
 /// acceleration applied along travel, and the end heading's sine and
 /// cosine when it has them ([`integrate_pose_trig`]). `sin_cos`: as
-/// [`integrate_pose_with`].
+/// [`integrate_pose_trig`].
 #[inline]
 pub(crate) fn advance(
     state: &VehicleState,
