@@ -76,6 +76,14 @@ INSIDE_MARGIN_M = 0.3
 IMPATIENT_DELAY_S = 30.0
 
 
+def _track_lane_beside(lane: str, track_lanes: list[str]) -> str:
+    """The track's junction lane on the junction edge of ``lane`` (SUMO's,
+    beside the track's: ``moveToXY`` or its driver's choice of lane at the
+    entry can put a vehicle there), or ``lane`` when the track has none."""
+    edge = lane.rsplit("_", 1)[0]
+    return next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
+
+
 def lacks_priority(link: Any) -> bool:
     """SUMO's word on a link of ``getNextLinks`` (lane, has priority, is
     open, has foe, via, ...): no priority, and a foe approaching."""
@@ -243,8 +251,7 @@ class Junctions:
         ``beside`` its track's."""
         pos = float(self.conn.get_lane_pos(vid))
         if beside:
-            edge = lane.rsplit("_", 1)[0]
-            own = next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
+            own = _track_lane_beside(lane, track_lanes)
             if own != lane:
                 # SUMO's position on the lane beside is not one on the
                 # track's: lanes of a fan-out start together and part (traced
@@ -352,7 +359,7 @@ class Junctions:
                     gap = pos - its - float(veh.getLength(other)) - float(veh.getMinGap(vid))
                     if best is not None and math.isinf(best_stop):
                         best_stop = self._stop_point(best)
-                    stop = gap + max(other_speed, 0.0) ** 2 / (2.0 * self.plan_decel)
+                    stop = self._stop_at(gap, other_speed)
                     if best is None or stop < best_stop:
                         best, best_stop = (other, gap), stop
                 rest -= length
@@ -366,7 +373,11 @@ class Junctions:
             speed = float(self.conn.sumo.vehicle.getSpeed(lead[0]))
         except Exception:
             speed = 0.0
-        return float(lead[1]) + max(speed, 0.0) ** 2 / (2.0 * self.plan_decel)
+        return self._stop_at(float(lead[1]), speed)
+
+    def _stop_at(self, gap: float, speed: float) -> float:
+        """The stop point of a leader ``gap`` ahead at ``speed`` (see ``_stop_point``)."""
+        return gap + max(speed, 0.0) ** 2 / (2.0 * self.plan_decel)
 
     def _way_to_merge(self, vid: str, lane: str, track_lanes: list[str]) -> tuple[str, str, Any] | None:
         """For ``vid`` on SUMO lane ``lane``: (its junction lane ahead or
@@ -374,11 +385,7 @@ class Junctions:
         to, a function of its lane position giving its distance to that
         lane's start) when that lane is one several ways merge onto; else None."""
         if lane.startswith(":"):
-            if lane in track_lanes:
-                own = lane
-            else:
-                edge = lane.rsplit("_", 1)[0]
-                own = next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
+            own = lane if lane in track_lanes else _track_lane_beside(lane, track_lanes)
             start = own
             after = self.network.lanes_after(own)
             if len(after) < 2:

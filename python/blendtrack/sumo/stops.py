@@ -64,7 +64,7 @@ from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.geometry import RouteGeometry
 from blendtrack.sumo.network import Network
-from blendtrack.sumo.tracks import SHARE_AFTER_M, Active, Interned
+from blendtrack.sumo.tracks import Active, Interned
 
 #: The halt is placed this far (m) before the stop's end position: the
 #: stopping law's last creep carries the front 0.155 to 0.207 m past its
@@ -236,7 +236,7 @@ class Stops:
         """The halt for SUMO's next stop ``st`` on the vehicle's present track."""
         slot = p.act.slot
         sf = self.fleet.s_front(slot)
-        pos = halt_position(float(st.endPos), float(self.network.net().getLane(st.lane).getLength()))
+        pos = halt_position(float(st.endPos), self.network.lane_length(st.lane))
         # On the first piece of the stop's lane covering the position, ahead
         # of the front (a lane the track drives twice: the next time).
         lane = self.lanes.get(st.lane, -1)
@@ -301,33 +301,18 @@ class Stops:
 
     def _take_lane(self, p: _Pending, edge: str, want: int) -> None:
         """Puts ``p``'s vehicle on the track of its route from the lane it is
-        on that enters ``edge`` on lane ``want`` where a connection allows
-        (``Tracks.geometry``'s ``prefer``), once blendtrack has its front
-        ``SHARE_AFTER_M`` into a normal lane of an earlier edge of its
-        track (as ``Tracks.leave_own_track``); built once per track the
-        vehicle is on."""
+        on that needs lane ``want`` of ``edge`` (``Tracks.onto_shared_track``
+        with the stop's lane, once blendtrack has its front ``SHARE_AFTER_M``
+        into a normal lane of an earlier edge of its track); built once per
+        track the vehicle is on."""
         act = p.act
         if self.lane_changes is None or act.changing is not None or act.own_track is not None:
             return
         if p.preferred is not None and p.preferred[0] is act.geo and p.preferred[1:] == (edge, want):
             return
-        tracks = self.lane_changes.tracks
-        slot = act.slot
-        k = self.fleet.occurrence(slot)
-        edges = act.geo.edges
-        at = next((j for j in range(k + 1, len(edges)) if edges[j] == edge), None)
-        if at is None or k < 0:
-            return
-        lane_id, pos = self.fleet.front_lane_position(slot)
-        lane = self.lanes.names[lane_id]
-        own, _, index = lane.rpartition("_")
-        if lane.startswith(":") or edges[k] != own or not index.isdigit() or pos < SHARE_AFTER_M:
-            return
-        geo, track = tracks.geometry(edges[k:], int(index), prefer=((at - k, want),))
-        p.preferred = (geo, edge, want)
-        if geo is not act.geo:
-            base = act.route_base + k
-            tracks.retrack(act, geo, track, owned=False, base=base, route_index=base)
+        geo = self.lane_changes.tracks.onto_shared_track(act, 0, (edge, want))
+        if geo is not None:
+            p.preferred = (geo, edge, want)
 
     def _check_started(self, vid: str, p: _Pending) -> None:
         """A vehicle standing at its halt that SUMO does not stop is let go."""

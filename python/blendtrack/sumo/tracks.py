@@ -231,7 +231,7 @@ class Tracks:
         built from there put it a lane over. True when it was moved."""
         if act.own_track is None or act.changing is not None:
             return False
-        return self._onto_shared_track(act, 1)
+        return self.onto_shared_track(act, 1) is not None
 
     def retry_early_change(self, act: Active) -> bool:
         """A vehicle whose track has a change due early (``pending_early``)
@@ -242,27 +242,37 @@ class Tracks:
         geo = act.geo
         if not geo.pending_early or geo.pending_change is None or act.changing is not None or act.own_track is not None:
             return False
-        return self._onto_shared_track(act, geo.pending_change[0] + 1)
+        return self.onto_shared_track(act, geo.pending_change[0] + 1) is not None
 
-    def _onto_shared_track(self, act: Active, first_edge: int) -> bool:
+    def onto_shared_track(self, act: Active, first_edge: int, stop_lane: tuple[str, int] | None = None) -> RouteGeometry | None:
         """Puts ``act`` on the shared track of its route from the lane it is
         on, once blendtrack has its front ``SHARE_AFTER_M`` into a normal
-        lane of its track's edge ``first_edge`` or a later one. True when it
-        was moved."""
+        lane of its track's edge ``first_edge`` or a later one; with
+        ``stop_lane`` (edge, lane index), the track that needs that lane at
+        the next occurrence of that edge (``geometry``'s ``prefer``: a
+        stop's lane). The track it is on then (moved only when that is
+        another), None when it was not put on one."""
         slot = act.slot
         k = self.fleet.occurrence(slot)
         edges = act.geo.edges
         if k < first_edge or k >= len(edges):
-            return False
+            return None
+        prefer: tuple[tuple[int, int], ...] = ()
+        if stop_lane is not None:
+            at = next((j for j in range(k + 1, len(edges)) if edges[j] == stop_lane[0]), None)
+            if at is None:
+                return None
+            prefer = ((at - k, stop_lane[1]),)
         lane_id, pos = self.fleet.front_lane_position(slot)
         lane = self.lanes.names[lane_id]
         edge, _, index = lane.rpartition("_")
         if lane.startswith(":") or edges[k] != edge or not index.isdigit() or pos < SHARE_AFTER_M:
-            return False
-        geo, track = self.geometry(edges[k:], int(index))
-        base = act.route_base + k
-        self.retrack(act, geo, track, owned=False, base=base, route_index=base)
-        return True
+            return None
+        geo, track = self.geometry(edges[k:], int(index), prefer=prefer)
+        if geo is not act.geo:
+            base = act.route_base + k
+            self.retrack(act, geo, track, owned=False, base=base, route_index=base)
+        return geo
 
     def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool, base: int, route_index: int | None = None) -> None:
         """Puts ``act`` on ``track`` (``owned``: built for it alone), whose
