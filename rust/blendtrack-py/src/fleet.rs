@@ -264,6 +264,7 @@ impl Fleet {
             alpha: al.as_deref(),
             leader_gap_m: lg.as_deref(),
             leader_speed_mps: ls.as_deref(),
+            leader_reaction_s: None,
             stop_gap_m: sg.as_deref(),
             soft_gap_m: fg.as_deref(),
             soft_speed_mps: fs.as_deref(),

@@ -112,6 +112,9 @@ pub(crate) struct Motion {
     /// Arc length of the front at the new state (m).
     pub s_front_m: f64,
     pub dt_s: f64,
+    /// How far the front may go before the leader at the start of the step
+    /// (its gap less the standstill margin; inf: no leader).
+    pub leader_room_m: f64,
 }
 
 /// The chosen move with what goes with it.
@@ -180,6 +183,9 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
             Some((lane, at)) if !cross && lane == piece.lane => piece.lane_length_m - at,
             _ => f64::INFINITY,
         };
+        // Nor past the leader's back as it stood at the start of the step,
+        // unless blendtrack's own move goes there (a leader moving off).
+        let room = room.min(dist.max(m.leader_room_m) + LANE_END_MARGIN_M);
         glide_move(d, &mut p, expect, (dist, room), cross, dt_s)
     } else if on_lane && p.pos >= d.body.length_m && !laps_back_onto_the_lane_before(d, k) {
         if let Some((lane, known)) = d.known {
@@ -231,7 +237,13 @@ fn crossing_lane_speed(route: &Route, k: usize, target: f64, s_old: f64, dt_s: f
 /// blendtrack (a step of 1 s from a standstill, its Euler move against
 /// blendtrack's sub-steps) was carried 1 cm over a stop line where
 /// blendtrack stopped 20 cm before it, stood there inside the junction, and
-/// the crossing traffic waited for it while it waited for them.
+/// the crossing traffic waited for it while it waited for them. Nor past
+/// the leader's back where it stood (`room` is the nearer of the two): a
+/// vehicle pulling away from a standstill at 2.6 m/s^2 behind a car still
+/// standing at a light, 0.66 m beyond SUMO's minGap, was sent at 1.08 m/s
+/// (its own speed at the end of the step, 1.2 m/s, less the tolerance)
+/// where blendtrack moved it 0.32 m, and SUMO called the 1.08 m a
+/// collision (Bologna, 203[0], seed 2 at 185 s).
 /// [`Move::Hold`] when the speed it has will do.
 fn glide_move(
     d: &Driven,
@@ -656,6 +668,40 @@ mod tests {
             (sim.pos - want).abs() < 1e-3,
             "simulator drifted to {} vs {want}",
             sim.pos
+        );
+    }
+
+    #[test]
+    fn pulling_away_behind_a_close_leader_the_simulator_is_not_sent_past_it() {
+        // 1 s steps from a standstill at 2.6 m/s^2, a leader 1.2 m ahead
+        // (beyond minGap) pulling away at 3 m/s: blendtrack's own move is
+        // short of the leader's back, and the speed sent (kept near the
+        // vehicle's speed at the end of the step) must not carry the
+        // simulator past where the leader stood.
+        let cfg = ControllerConfig {
+            preferred_speed: 15.0,
+            preferred_acceleration: 2.6,
+            ..Default::default()
+        };
+        let (path, route) = road(None, true);
+        let mut f = RouteFleet::new(TrafficSettings::default()).unwrap();
+        let t = f.add_route(path, cfg, route).unwrap() as i64;
+        let a = f
+            .add_vehicle(t, None, None, body(), at(100.0, 0.0), None)
+            .unwrap() as i64;
+        let margin = TrafficSettings::default().standstill_margin_m;
+        let gap = 1.2;
+        let sf = f.s_front(a).unwrap();
+        plan_one(&mut f, a, (gap, 3.0), (10, sf));
+        let out = f.step(&[], 1.0).unwrap();
+        let moved = f.s_front(a).unwrap() - sf;
+        assert!(out.v_mps[0] > 1.0, "it pulls away: {}", out.v_mps[0]);
+        assert_eq!(out.moves, [Move::Speed]);
+        let room = (gap - margin).max(moved);
+        assert!(
+            out.sumo_speed_mps[0] * 1.0 <= room + 1e-9,
+            "sent {} m/s for a step, room {room} m (blendtrack moved {moved} m)",
+            out.sumo_speed_mps[0]
         );
     }
 

@@ -196,6 +196,7 @@ impl RouteFleet {
         let inputs = FleetInputs {
             leader_gap_m: Some(gaps.leader),
             leader_speed_mps: Some(gaps.leader_speed),
+            leader_reaction_s: gaps.leader_reaction,
             stop_gap_m: Some(gaps.stop),
             soft_gap_m: Some(gaps.soft),
             soft_speed_mps: Some(&plan.soft_speed),
@@ -253,6 +254,11 @@ impl RouteFleet {
             v_mps: v,
             s_front_m: sf_new,
             dt_s,
+            leader_room_m: if plan.leader_gap[i].is_finite() {
+                plan.leader_gap[i]
+            } else {
+                f64::INFINITY
+            },
         };
         let st = self.settings;
         let p = choose_move(d, k, &st, &motion);

@@ -88,6 +88,27 @@ pub(crate) fn leader_advance_speed(v_mps: f64, external: bool, dt_s: f64) -> f64
     }
 }
 
+/// The stopping law's reaction time for a leader the simulator drives, `t`
+/// into a step of [`HOLD_BRAKING_MIN_STEP_S`] or more (control steps of
+/// `h`): the vehicle's reaction time `tau_s` counted from when the leader
+/// was seen, at the start of the step, never under one control step.
+///
+/// The leader is held at its worst over the step (its stop point where it
+/// was then, [`leader_advance_speed`]), so whatever it did since is already
+/// allowed for; what is left is to react by `tau` after the sighting. With
+/// the whole `tau` at every control step the two add up: a follower kept
+/// `tau + dt` of headway (2 s at a 1 s step, where SUMO's driver keeps its
+/// `tau`, 1 s) and crossed a stop line 3.8-4.0 s after the driver ahead
+/// (Bologna, light 235; plain SUMO 2.0 s). Counted down, a follower at a
+/// steady speed behind a steady leader keeps `tau` of headway, and the law
+/// still guarantees that braking at `b_f` from the end of the step stops it
+/// before the held stop point (the reaction left is at least `h`, the time
+/// its acceleration is held). The emergency branch (no plan) has no
+/// reaction time and is not touched.
+pub(crate) fn reaction_left(tau_s: f64, t_s: f64, h_s: f64) -> f64 {
+    (tau_s - t_s).max(h_s)
+}
+
 /// How far a vehicle got from `from` to `to` (m): the rear axle's
 /// displacement. The bicycle model never drives against its direction of
 /// travel, so this is its advance along it (a chord of the arc it drove,
@@ -139,6 +160,9 @@ pub(crate) struct HeldGaps<'a> {
     pub(crate) leader: &'a [f64],
     /// The leaders' speeds as the stopping law takes them.
     pub(crate) leader_speed: &'a [f64],
+    /// The stopping law's reaction time for each leader (NaN: the
+    /// vehicle's own), or None for every vehicle's own.
+    pub(crate) leader_reaction: Option<&'a [f64]>,
     pub(crate) stop: &'a [f64],
     pub(crate) soft: &'a [f64],
 }
@@ -149,6 +173,7 @@ impl<'a> HeldGaps<'a> {
         HeldGaps {
             leader: &plan.leader_gap,
             leader_speed: &plan.leader_speed,
+            leader_reaction: None,
             stop: &plan.stop_gap,
             soft: &plan.soft_gap,
         }
@@ -204,6 +229,19 @@ impl RouteFleet {
         let lock_step = dt_s >= HOLD_BRAKING_MIN_STEP_S;
         let mut stop = plan.stop_gap.clone();
         let mut soft = plan.soft_gap.clone();
+        // The reaction times of vehicles behind a leader the simulator
+        // drives, counted down over a long step (NaN: the vehicle's own).
+        let mut reaction = vec![f64::NAN; m];
+        let mut tau = vec![f64::NAN; m];
+        if lock_step {
+            for ((t, &external), &slot) in
+                tau.iter_mut().zip(&plan.leader_external).zip(&plan.slots)
+            {
+                if external {
+                    *t = self.fleet.vehicle_config(slot)?.reaction_time;
+                }
+            }
+        }
         for k in 0..n {
             if k > 0 {
                 let t = k as f64 * h;
@@ -221,6 +259,9 @@ impl RouteFleet {
                             dt_s,
                         );
                         leader[i] = plan.leader_gap[i] + v_adv * t - moved[i];
+                        if !tau[i].is_nan() {
+                            reaction[i] = reaction_left(tau[i], t, h);
+                        }
                     }
                     soft[i] = plan.soft_gap[i] + held_speed(plan.soft_speed[i]) * t - moved[i];
                     stop[i] = plan.stop_gap[i] - moved[i];
@@ -229,6 +270,7 @@ impl RouteFleet {
             let gaps = HeldGaps {
                 leader: &leader,
                 leader_speed: &leader_speed,
+                leader_reaction: Some(&reaction),
                 stop: &stop,
                 soft: &soft,
             };
@@ -302,7 +344,7 @@ pub(crate) fn stepped_finite(state: &VehicleState, s_rear_m: f64) -> bool {
 
 #[cfg(test)]
 mod tests {
-    use super::{braking_mean_speed, substeps};
+    use super::{braking_mean_speed, reaction_left, substeps};
     use crate::testkit::*;
     use crate::*;
     use blendtrack::ControllerConfig;
@@ -376,6 +418,29 @@ mod tests {
         n: usize,
         leader: impl Fn(usize, f64) -> (f64, f64),
     ) -> Vec<VehicleState> {
+        reference_states_reacting(s0, n, leader, |_| f64::NAN)
+    }
+
+    /// The stopping law's reaction time for a leader the simulator drives
+    /// at control step `k` of a 1 s step of control steps of `H`, as
+    /// `control_steps` sets it (the test config's, counted from the
+    /// sighting; NaN at the first: the config's own).
+    fn counted_down(k: usize) -> f64 {
+        if k == 0 {
+            f64::NAN
+        } else {
+            reaction_left(ControllerConfig::default().reaction_time, k as f64 * H, H)
+        }
+    }
+
+    /// [`reference_states`] with the stopping law's reaction time for the
+    /// leader at control step `k` from `reaction(k)` (NaN: the config's).
+    fn reference_states_reacting(
+        s0: VehicleState,
+        n: usize,
+        leader: impl Fn(usize, f64) -> (f64, f64),
+        reaction: impl Fn(usize) -> f64,
+    ) -> Vec<VehicleState> {
         let mut fleet = Fleet::new();
         let cfg = ControllerConfig {
             preferred_speed: 15.0,
@@ -391,6 +456,7 @@ mod tests {
                 .step(&FleetInputs {
                     leader_gap_m: Some(&[gap]),
                     leader_speed_mps: Some(&[v_leader]),
+                    leader_reaction_s: Some(&[reaction(k)]),
                     stop_gap_m: Some(&[f64::NAN]),
                     soft_gap_m: Some(&[f64::NAN]),
                     soft_speed_mps: Some(&[f64::NAN]),
@@ -569,8 +635,10 @@ mod tests {
         let (mut f, t) = fleet_with(road(None, true), settings(H));
         let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
         let out = step_behind(&mut f, a, (g0, 10.0), 1.0);
-        let still = |_: usize, x: f64| g0 - margin - (x - s0.x_m);
-        let want = reference(s0, 20, still, 10.0);
+        let still = |_: usize, x: f64| (g0 - margin - (x - s0.x_m), 10.0);
+        let want = *reference_states_reacting(s0, 20, still, counted_down)
+            .last()
+            .unwrap();
         let got = f.state(a).unwrap();
         for (g, w) in [(got.x_m, want.x_m), (got.v_mps, want.v_mps)] {
             assert!((g - w).abs() < 1e-9, "{g} vs {w}");
@@ -624,7 +692,12 @@ mod tests {
         };
         let (f, a, b) = pair(1.0);
         // b alone: its standing leader's gap shrinks by b's advance only.
-        let b_states = reference_states(sb, 20, |_, x| (gb - margin - (x - sb.x_m), 0.0));
+        let b_states = reference_states_reacting(
+            sb,
+            20,
+            |_, x| (gb - margin - (x - sb.x_m), 0.0),
+            counted_down,
+        );
         let got_b = f.state(b).unwrap();
         assert!((got_b.x_m - b_states[20].x_m).abs() < 1e-9);
         assert!(got_b.v_mps < 11.0, "b braked hard: {}", got_b.v_mps);
@@ -644,6 +717,52 @@ mod tests {
         let (f, a, _) = pair(8.0 * H);
         let held = behind_driving_on(sa, 8, ga, 15.0);
         assert!((f.state(a).unwrap().x_m - held.x_m).abs() < 1e-9);
+    }
+
+    #[test]
+    fn behind_a_steady_leader_the_simulator_drives_a_long_step_keeps_the_law_s_own_headway() {
+        // Closed form: at equal speeds v the law asks for no acceleration at
+        // s* = s0 + v tau + v^2 / (2 |b_f|) - v^2 / (2 |b_l|) (the
+        // stopping-law identity with a = 0). With the reaction time counted
+        // from the sighting, a follower at 1 s steps settles there, as at
+        // 0.1 s steps; with the whole tau at every control step it kept
+        // v dt more (26.25 m instead of 16.25 m at 10 m/s).
+        let cfg = ControllerConfig::default();
+        let margin = TrafficSettings::default().standstill_margin_m;
+        let v = 10.0;
+        let s_star =
+            cfg.preferred_stop_dist + v * cfg.reaction_time + v * v / (-2.0 * cfg.max_deceleration)
+                - v * v / (-2.0 * cfg.max_obs_deceleration);
+        for dt in [1.0_f64, 0.1] {
+            let s0 = at(50.0, v);
+            let (mut f, t) = fleet_with(road(None, true), settings(H));
+            let a = f.add_vehicle(t, None, None, body(), s0, None).unwrap() as i64;
+            // The leader, driven elsewhere at v, 30 m ahead at first.
+            let (mut lead, mut gap) = (0.0, 30.0);
+            // 40 s: 450 m of the 600 m road.
+            let steps = (40.0_f64 / dt).round() as usize;
+            for _ in 0..steps {
+                step_behind(&mut f, a, (gap, v), dt);
+                lead += v * dt;
+                gap = 30.0 + lead - (f.state(a).unwrap().x_m - s0.x_m);
+                assert!(gap > margin, "dt {dt}: closed in to {gap}");
+            }
+            let got = f.state(a).unwrap();
+            assert!((got.v_mps - v).abs() < 0.05, "dt {dt}: {}", got.v_mps);
+            assert!(
+                (gap - margin - s_star).abs() < 0.3,
+                "dt {dt}: gap {} vs s* {s_star}",
+                gap - margin
+            );
+        }
+    }
+
+    #[test]
+    fn the_reaction_time_left_counts_down_from_the_sighting_to_one_control_step() {
+        assert_eq!(reaction_left(1.0, 0.0, 0.05), 1.0);
+        assert!((reaction_left(1.0, 0.4, 0.05) - 0.6).abs() < 1e-12);
+        assert_eq!(reaction_left(1.0, 0.99, 0.05), 0.05);
+        assert_eq!(reaction_left(0.5, 0.75, 0.05), 0.05);
     }
 
     #[test]

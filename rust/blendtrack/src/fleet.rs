@@ -84,6 +84,9 @@ pub struct FleetInputs<'a> {
     pub leader_gap_m: Option<&'a [f64]>,
     /// Leader speed along the direction of travel (m/s).
     pub leader_speed_mps: Option<&'a [f64]>,
+    /// The stopping law's reaction time for the leader (s; NaN = the
+    /// vehicle's `reaction_time`): see [`Obstacle::reaction_s`].
+    pub leader_reaction_s: Option<&'a [f64]>,
     /// Gap to a stop line (m; NaN/inf = none).
     pub stop_gap_m: Option<&'a [f64]>,
     /// Gap to a vehicle to line up behind (m; NaN/inf = none): a soft
@@ -118,6 +121,7 @@ impl<'a> FleetInputs<'a> {
             alpha: None,
             leader_gap_m: None,
             leader_speed_mps: None,
+            leader_reaction_s: None,
             stop_gap_m: None,
             soft_gap_m: None,
             soft_speed_mps: None,
@@ -698,7 +702,8 @@ fn step_one(
     let speed = |v: f64| if v.is_finite() { v.max(0.0) } else { 0.0 };
     let gap = opt(inp.leader_gap_m);
     if gap.is_finite() {
-        obstacles[n_obs] = Obstacle::new(gap, speed(opt(inp.leader_speed_mps)));
+        obstacles[n_obs] = Obstacle::new(gap, speed(opt(inp.leader_speed_mps)))
+            .with_reaction(opt(inp.leader_reaction_s));
         n_obs += 1;
     }
     let soft = opt(inp.soft_gap_m);

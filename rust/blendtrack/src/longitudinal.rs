@@ -59,6 +59,11 @@ pub struct Obstacle {
     /// stop at: only for a vehicle does braking without a plan go past b_l
     /// toward `emergency_deceleration` (overshooting a line is not a collision).
     pub vehicle: bool,
+    /// The reaction time the stopping law takes for this obstacle (s; NaN:
+    /// the configured `reaction_time`). A leader seen some time ago and
+    /// held where it stops at the worst since ([`Obstacle::with_reaction`])
+    /// leaves less of the reaction time to come.
+    pub reaction_s: f64,
 }
 
 impl Obstacle {
@@ -69,6 +74,7 @@ impl Obstacle {
             speed_mps,
             soft: false,
             vehicle: true,
+            reaction_s: f64::NAN,
         }
     }
 
@@ -80,6 +86,7 @@ impl Obstacle {
             speed_mps: 0.0,
             soft: false,
             vehicle: false,
+            reaction_s: f64::NAN,
         }
     }
 
@@ -90,7 +97,14 @@ impl Obstacle {
             speed_mps,
             soft: true,
             vehicle: true,
+            reaction_s: f64::NAN,
         }
+    }
+
+    /// The same obstacle with the stopping law's reaction time `reaction_s`
+    /// (s, > 0) in place of the configured one.
+    pub fn with_reaction(self, reaction_s: f64) -> Self {
+        Obstacle { reaction_s, ..self }
     }
 }
 
@@ -204,14 +218,14 @@ pub fn longitudinal_accel(
     // Without a plan: b_l, or harder when b_l can no longer stop the
     // vehicle before a vehicle ahead (the virtual and soft ones cap it below;
     // a line to stop at keeps b_l).
-    let law = |gap: f64, vl: f64, vehicle: bool| {
+    let law = |gap: f64, vl: f64, vehicle: bool, tau: f64| {
         let vl = vl.max(0.0);
         stopping_plan(
             speed_abs,
             gap,
             vl,
             cfg.preferred_stop_dist,
-            cfg.reaction_time,
+            tau,
             cfg.max_deceleration,
             cfg.max_obs_deceleration,
         )
@@ -231,12 +245,17 @@ pub fn longitudinal_accel(
     // A curve is not an emergency: braking for the virtual obstacle stops at
     // the planning deceleration b_f; only real obstacles may demand b_l.
     let virt = d_obs
-        .map(|d| law(d, 0.0, false).max(cfg.max_deceleration))
+        .map(|d| law(d, 0.0, false, cfg.reaction_time).max(cfg.max_deceleration))
         .unwrap_or(f64::INFINITY);
     let mut a = free.min(virt);
     for o in obstacles {
         let r = if o.gap_m.is_finite() && o.speed_mps.is_finite() {
-            law(o.gap_m, o.speed_mps, o.vehicle)
+            let tau = if o.reaction_s > 0.0 {
+                o.reaction_s
+            } else {
+                cfg.reaction_time
+            };
+            law(o.gap_m, o.speed_mps, o.vehicle, tau)
         } else if o.gap_m.is_nan() || o.speed_mps.is_nan() {
             // An obstacle we cannot read is treated as a wall right here.
             cfg.max_obs_deceleration
@@ -1115,6 +1134,53 @@ mod tests {
         // Already touching: the limit. A limit gentler than b_l never weakens b_l.
         assert_eq!(emergency_accel(5.0, 0.0, 0.0, -4.0, -9.0), -9.0);
         assert_eq!(emergency_accel(20.0, 30.0, 0.0, -4.0, -2.0), -4.0);
+    }
+
+    #[test]
+    fn an_obstacle_s_own_reaction_time_replaces_the_configured_one_for_it_alone() {
+        let cfg = ControllerConfig {
+            max_deceleration: -4.0,
+            max_obs_deceleration: -4.0,
+            preferred_speed: 30.0,
+            ..Default::default()
+        };
+        let law = |tau: f64| stopping_plan(10.0, 12.0, 6.0, 0.0, tau, -4.0, -4.0).unwrap();
+        let at = |o: Obstacle| longitudinal_accel(10.0, None, &[o], &cfg).accel_mps2;
+        let o = Obstacle::new(12.0, 6.0);
+        assert_eq!(at(o), law(cfg.reaction_time));
+        assert_eq!(at(o.with_reaction(0.4)), law(0.4));
+        // Less reaction time to come, more room now (both below free flow).
+        assert!(law(0.4) > law(cfg.reaction_time));
+        assert!(law(0.4) < free_flow_accel(10.0, &cfg));
+        // NaN (and nonsense) fall back to the configured one.
+        assert_eq!(at(o.with_reaction(f64::NAN)), law(cfg.reaction_time));
+        assert_eq!(at(o.with_reaction(-1.0)), law(cfg.reaction_time));
+        // The fleet takes it per leader.
+        let mut fleet = crate::fleet::Fleet::new();
+        let t = fleet
+            .add_track(Path::straight(200.0, 1.0).unwrap(), cfg.clone())
+            .unwrap() as i64;
+        let slots = [fleet.add_vehicle(t, None, None).unwrap() as i64; 1];
+        let mut step = |reaction: Option<&[f64]>| {
+            fleet
+                .step(&crate::fleet::FleetInputs {
+                    leader_gap_m: Some(&[12.0]),
+                    leader_speed_mps: Some(&[6.0]),
+                    leader_reaction_s: reaction,
+                    ..crate::fleet::FleetInputs::new(
+                        &slots,
+                        &[10.0],
+                        &[0.0],
+                        &[0.0],
+                        &[10.0],
+                        &[0.0],
+                    )
+                })
+                .unwrap()
+                .accel_mps2[0]
+        };
+        assert_eq!(step(None), law(cfg.reaction_time));
+        assert_eq!(step(Some(&[0.4])), law(0.4));
     }
 
     #[test]
