@@ -170,6 +170,9 @@ def _timed_run(scenario_name: str, end: float, scale: float, n: Count) -> tuple[
         t = time.thread_time()
         sumo_step()
         acc["sumo_step"] += time.thread_time() - t
+        # Counted here, not in a step hook: with a hook the plugin reads
+        # every light's state anew each step (a hook may switch one).
+        counts.append(len(run.sumo.vehicle.getIDList()))
 
     start = run.conn.start
 
@@ -180,7 +183,6 @@ def _timed_run(scenario_name: str, end: float, scale: float, n: Count) -> tuple[
         run.sumo.simulationStep = timed_step
 
     run.conn.start = start_and_time  # type: ignore[method-assign]
-    run.step_hooks.append(lambda r, t: counts.append(len(r.sumo.vehicle.getIDList())))
     return run, {"acc": acc, "counts": counts}
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
 
+import numpy as np
 import pytest
 import traci.constants as tc
 
@@ -1309,3 +1310,82 @@ def test_a_change_waits_for_a_driver_joining_the_target_lane_from_beyond() -> No
     assert not joining()
     lcs.active["far"] = SimpleNamespace(vid="far", changing=(-1, 1))  # type: ignore[assignment]
     assert joining()
+
+
+def test_a_sumo_driver_waiting_for_the_controlled_vehicle_s_way_at_an_internal_stop_is_not_followed() -> None:
+    """Junction 50 of Bologna in small: the major way ":w_0_0" (12 m) and the
+    minor left turn ":w_1_0" (13 m), then its internal waiting point
+    ":w_2_0" (3 m), merge onto "out". A SUMO driver standing at the end of
+    ":w_1_0" waits there for the major way: followed, the controlled vehicle
+    stood and so did it, for good. Moving, or on a way that does not give
+    way to the vehicle's, or controlled, it is followed as before."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane=":w_0_0", pos=5.0, speed=0.0, min_gap=2.5)
+    v.add("sumo", lane=":w_1_0", pos=12.9, speed=0.0, length=5.0)
+    conn.lanes = {":w_1_0": ["sumo"]}
+    after = {":w_0_0": [(":w_0_0", 12.0), ("out", 100.0)]}
+    ways = {"out": [((":w_0_0", 12.0),), ((":w_1_0", 13.0), (":w_2_0", 3.0))]}
+    prohibitors = {":w_1_0": [(":w_0_0", "maj", 50.0, "", -1)]}
+
+    def junctions(yields: bool, controlled: Any = None) -> Junctions:
+        net = SimpleNamespace(lanes_after=lambda via: after.get(via, []), ways_into=lambda lane: ways.get(lane, []),
+                              lane_length=lambda lane: 50.0, lanes_into_merges=lambda: frozenset({"maj"}),
+                              prohibitors=lambda via: prohibitors.get(via, []) if yields else [])
+        return Junctions(conn, net, None, None, 4.0, controlled={} if controlled is None else controlled)  # type: ignore[arg-type]
+
+    track = ["maj", ":w_0_0", "out"]
+    # 7 m from the merge point against its 13 - 12.9 + 3 = 3.1 m: nearer, but waiting for "me".
+    assert junctions(yields=True).leader_at_merge("me", ":w_0_0", track, None) is None
+    # Its way has priority: it is followed (gap 7 - 3.1 - 5 - 2.5).
+    assert junctions(yields=False).leader_at_merge("me", ":w_0_0", track, None) == ("sumo", pytest.approx(-3.6))
+    # Moving, it goes: followed.
+    v.cars["sumo"]["speed"] = 1.0
+    assert junctions(yields=True).leader_at_merge("me", ":w_0_0", track, None) == ("sumo", pytest.approx(-3.6))
+    # Controlled: the rule between two controlled vehicles (nearer goes) holds.
+    v.cars["sumo"]["speed"] = 0.0
+    assert junctions(yields=True, controlled={"sumo": None}).leader_at_merge("me", ":w_0_0", track, None) == ("sumo", pytest.approx(-3.6))
+    # Not yet at its waiting point (4 m before it): followed as before.
+    v.cars["sumo"]["pos"] = 9.0
+    assert junctions(yields=True).leader_at_merge("me", ":w_0_0", track, None) == ("sumo", pytest.approx(7.0 - 7.0 - 5.0 - 2.5))
+
+
+def test_inside_a_fanout_a_body_standing_across_the_rest_of_the_way_is_the_leader() -> None:
+    """Lane "in_0" fans out through ":f_0_0" (to "out_0", straight east from
+    (0, 0) to (10, 0)) and ":f_0_1" (to "out_1"). "me" is inside on
+    ":f_0_0", its front at (1, 0). "other" stands 0.5 m onto "out_1" with
+    its back in the junction: its body (width 2) runs from (1, 1.2) to
+    (6, 1.2), 1.2 m beside the way, within the half widths and the margin
+    (1 + 0.3 + 1). Gap: 1.2 - 1 (its half width) - minGap 2.5 = -2.3."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane=":f_0_0", pos=1.0, speed=1.0, xy=(1.0, 0.0), angle=90.0)
+    v.add("other", lane="out_1", pos=0.5, speed=0.0, xy=(6.0, 1.2), angle=90.0)
+    conn.lanes = {"out_1": ["other"]}
+    net = SimpleNamespace(
+        from_lane=lambda via: "in_0" if via.startswith(":f_0_") else None,
+        fanouts=lambda: {"in_0": ((":f_0_0", ":f_0_1"), 100.0)},
+        junction_lanes=lambda via: (np.array([[0.0, 0.0], [10.0, 0.0]]), (":f_0_1",)),
+        junction_exits=lambda via: ("out_1",),
+    )
+    j = Junctions(conn, net, None, None, 4.0, controlled={})  # type: ignore[arg-type]
+    track = ["in_0", ":f_0_0", "out_0"]
+    assert j.leader_in_fanout("me", ":f_0_0", track, None) == ("other", pytest.approx(-2.3))
+    # A nearer leader of its own stays; a farther one gives way to the body.
+    assert j.leader_in_fanout("me", ":f_0_0", track, ("near", -3.0)) == ("near", -3.0)
+    assert j.leader_in_fanout("me", ":f_0_0", track, ("far", 20.0)) == ("other", pytest.approx(-2.3))
+    # Moving off, it is not waited for.
+    v.cars["other"]["speed"] = FOLLOW_MIN_SPEED_MPS
+    assert j.leader_in_fanout("me", ":f_0_0", track, None) is None
+    v.cars["other"]["speed"] = 0.0
+    # Clear of the way (3.5 m beside it), or behind the front: not in the way.
+    v.cars["other"]["xy"] = (6.0, 3.5)
+    assert j.leader_in_fanout("me", ":f_0_0", track, None) is None
+    v.cars["other"]["xy"] = (-1.5, 1.2)
+    assert j.leader_in_fanout("me", ":f_0_0", track, None) is None
+    # Its back out of the junction (SUMO lists it on the lane out only): not looked at.
+    v.cars["other"].update(xy=(6.0, 1.2), pos=5.5)
+    assert j.leader_in_fanout("me", ":f_0_0", track, None) is None
+    # A way that does not start at a fan-out is not looked at.
+    v.cars["other"]["pos"] = 0.5
+    assert j.leader_in_fanout("me", ":g_0_0", ["in_0", ":g_0_0", "out_0"], ("x", 9.0)) == ("x", 9.0)

@@ -112,6 +112,10 @@ class RouteGeometry:
     pending_early: bool = False
     #: Total arc length (m).
     length_m: float = 0.0
+    #: What other modules derive from this geometry and the network alone,
+    #: kept once found (``Junctions.leader_at_merge``: the merge ahead of
+    #: each lane).
+    memo: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
 
 def _shape(lane: Any) -> np.ndarray:
@@ -555,6 +559,18 @@ def body_segment(veh: Any, vid: str) -> tuple[np.ndarray, float]:
     length = float(veh.getLength(vid))
     ux, uy = math.sin(a), math.cos(a)  # SUMO's angle: clockwise from north
     return np.array([[x - length * ux, y - length * uy], [x, y]]), 0.5 * float(veh.getWidth(vid))
+
+
+def path_ahead(path: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """The polyline ``path`` (n x 2, n >= 2) from the point nearest ``point``
+    on it onwards (that point first)."""
+    a, b = path[:-1], path[1:]
+    d = b - a
+    den = np.einsum("ij,ij->i", d, d)
+    t = np.clip(np.einsum("ij,ij->i", point - a, d) / np.where(den > 0.0, den, 1.0), 0.0, 1.0)
+    q = a + t[:, None] * d
+    k = int(np.argmin(np.einsum("ij,ij->i", q - point, q - point)))
+    return np.vstack([q[k], path[k + 1 :]])
 
 
 def segments_distance(p: np.ndarray, q: np.ndarray) -> float:

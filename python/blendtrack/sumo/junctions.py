@@ -13,7 +13,7 @@ import numpy as np
 
 from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection
-from blendtrack.sumo.geometry import body_segment, segments_distance
+from blendtrack.sumo.geometry import body_segment, path_ahead, segments_distance
 from blendtrack.sumo.network import Network
 from blendtrack.sumo.tracks import Tracks
 
@@ -76,6 +76,10 @@ INSIDE_MARGIN_M = 0.3
 IMPATIENT_DELAY_S = 30.0
 
 
+#: A memo's mark for a key not looked up yet (None is a value).
+_UNKNOWN = object()
+
+
 def _track_lane_beside(lane: str, track_lanes: list[str]) -> str:
     """The track's junction lane on the junction edge of ``lane`` (SUMO's,
     beside the track's: ``moveToXY`` or its driver's choice of lane at the
@@ -108,6 +112,9 @@ class Junctions:
         self.halted: dict[str, str] = {}
         #: Each traffic light's last state (as SUMO's state string).
         self.tls_state: dict[str, str] = {}
+        #: Can a light have been switched since SUMO's step (a step hook,
+        #: another TraCI client)? Then ``refresh_tls`` reads each anew.
+        self.lights_anew = True
         self.counts = {"inside_junction_waits": 0}
         #: The controlled vehicles told to wait at their line last step, and
         #: this step's so far (``new_step`` moves them over).
@@ -118,6 +125,11 @@ class Junctions:
         #: Per vehicle that went impatient: the junction lane it goes
         #: through and the impatience it went with (``_Patience``).
         self.went: dict[str, tuple[str, float]] = {}
+        #: Junction lane -> its ``Network.prohibitors``, each with its
+        #: ``Network.conflict`` (where the two ways cross) appended.
+        self._prohibitors: dict[str, list[tuple[str, str | None, float, str, int, float, float]]] = {}
+        #: (merge target, own junction lane) -> ``_merging_lanes``.
+        self._merging: dict[tuple[str, str], list[tuple[str, float, float, bool]]] = {}
 
     def new_step(self) -> None:
         """This step's yield answers begin: last step's waiters are known."""
@@ -126,16 +138,22 @@ class Junctions:
     def refresh_tls(self) -> None:
         """Passes the lights that changed this step to the RouteFleet.
 
-        Each light's state is read anew (a microsecond each with libsumo):
-        the subscription's value is the one of the simulation step, and a
-        light another client switched since (a step hook of this process,
-        which runs after the step) would be seen a step late. Both backends
-        read it so, so that they drive alike."""
+        With ``lights_anew`` each light's state is read anew (a microsecond
+        each with libsumo): the subscription's value is the one of the
+        simulation step, and a light another client switched since (a step
+        hook of this process, which runs after the step, or another TraCI
+        client) would be seen a step late. Both backends read it so then,
+        so that they drive alike. Without (libsumo and no step hook:
+        nothing can have switched a light since the step) the
+        subscription's value is the state now, and is taken as it is."""
+        anew = self.lights_anew
         light = self.tracks.lights.id
         set_signal = self.fleet.set_signal
         tl = self.conn.sumo.trafficlight
-        for tls in tl.getAllSubscriptionResults():
-            state = tl.getRedYellowGreenState(tls)
+        results = tl.getAllSubscriptionResults()
+        key = self.conn.tc.TL_RED_YELLOW_GREEN_STATE
+        for tls in results:
+            state = tl.getRedYellowGreenState(tls) if anew else results[tls][key]
             if self.tls_state.get(tls) != state:
                 self.tls_state[tls] = state
                 set_signal(light(tls), state)
@@ -311,7 +329,47 @@ class Junctions:
         found = self._first_on_way(vid, self.network.lanes_after(own), to_end)
         return found if found is not None and (lead is None or found[1] < float(lead[1])) else lead
 
-    def leader_at_merge(self, vid: str, lane: str, track_lanes: list[str], lead: Any) -> Any:
+    def leader_in_fanout(self, vid: str, lane: str, track_lanes: list[str], lead: Any) -> Any:
+        """``lead`` (as ``getLeader`` gives it, None for none) or, for ``vid``
+        inside a junction on a way that starts where its lane fans out
+        (``Network.fanouts``), the nearest vehicle standing (below
+        ``FOLLOW_MIN_SPEED_MPS``) with its body across the rest of that way:
+        on the branch beside, or just past that branch's exit with its back
+        still in the junction. The gap is the straight distance from the
+        front to that body less the minGap (never more than along the way).
+        ``getLeader`` looks along the vehicle's own lanes only, and the check
+        of bodies in the way (``junction_blocked``) is made before the line:
+        a controlled vehicle a 1 s step had carried 0.8 m past its line,
+        standing there, drove on into the back of one standing 0.5 m onto the
+        lane beside (Bologna, junction 8)."""
+        own = lane if lane in track_lanes else _track_lane_beside(lane, track_lanes)
+        origin = self.network.from_lane(own)
+        if origin is None or origin not in self.network.fanouts():
+            return lead
+        path, lanes = self.network.junction_lanes(own)
+        if not lanes or len(path) < 2:
+            return lead
+        veh = self.conn.sumo.vehicle
+        ahead = None
+        best, best_gap = lead, (float(lead[1]) if lead else math.inf)
+        for other in self._inside_junction(vid, own, lanes):
+            if lead is not None and other == lead[0] or float(self.conn.get_speed(other)) >= FOLLOW_MIN_SPEED_MPS:
+                continue
+            if ahead is None:
+                # The way's rest and the front, once there is a body to check.
+                front = np.asarray(veh.getPosition(vid), dtype=float)
+                ahead = path_ahead(path, front)
+                reach = 0.5 * float(veh.getWidth(vid)) + INSIDE_MARGIN_M
+            body, half = body_segment(veh, other)
+            if segments_distance(body, ahead) >= reach + half:
+                continue
+            gap = max(segments_distance(body, front[None, :]) - half, 0.0) - float(veh.getMinGap(vid))
+            if gap < best_gap:
+                best, best_gap = (other, gap), gap
+        return best
+
+    def leader_at_merge(self, vid: str, lane: str, track_lanes: list[str], lead: Any,
+                        memo: dict[str, Any] | None = None) -> Any:
         """``lead`` (as ``getLeader`` gives it, None for none) or, when
         ``vid`` is within ``MERGE_LOOKAHEAD_M`` of where its way through a
         junction merges with other ways onto one lane, the vehicle on one of
@@ -327,43 +385,85 @@ class Junctions:
         nearer one. Of ``lead`` and such a vehicle the one followed is the
         one whose stop point (gap plus braking distance at the planning
         deceleration) is nearer: a merging vehicle nearer but faster than a
-        standing leader must not hide it."""
-        way = self._way_to_merge(vid, lane, track_lanes)
+        standing leader must not hide it.
+
+        ``memo``: a dict kept with ``track_lanes`` (``RouteGeometry.memo``)
+        where the merge ahead of each lane, which depends on the track and
+        the network only, is kept once found."""
+        if memo is None:
+            way = self._way_to_merge(lane, track_lanes)
+        else:
+            way = memo.get(lane, _UNKNOWN)
+            if way is _UNKNOWN:
+                way = memo[lane] = self._way_to_merge(lane, track_lanes)
         if way is None:
             return lead
-        own, target, to_merge = way
+        own, target, ahead, start = way
+        get_speed, get_pos, vehicles_on = self.conn.get_speed, self.conn.get_lane_pos, self.conn.vehicles_on
+        # Farther than MERGE_LOOKAHEAD_M the answer is ``lead`` whoever is on
+        # the merging ways: their lanes are read only within it.
+        p = float(get_pos(vid))
+        pos = ahead - (self._front_on(vid, start, p) if start is not None else p)
+        if pos > MERGE_LOOKAHEAD_M:
+            return lead
         veh = self.conn.sumo.vehicle
-        pos = None
+        speed, read_speed = 0.0, True
         best, best_stop = lead, math.inf
-        for chain in self.network.ways_into(target):
-            names = [name for name, _ in chain]
-            if own in names:
-                continue
-            rest = sum(length for _, length in chain)
-            for name, length in chain:
-                for other in self.conn.vehicles_on(name):
-                    if other == vid:
-                        continue
-                    if pos is None:
-                        pos = to_merge(float(self.conn.get_lane_pos(vid)))
-                        if pos > MERGE_LOOKAHEAD_M:
-                            return lead
-                        speed = float(veh.getSpeed(vid))
-                    its = rest - float(veh.getLanePosition(other))
-                    other_speed = float(veh.getSpeed(other))
-                    # Nearer the merge point (a SUMO driver: about as near),
-                    # or sooner there at the speeds both have now.
-                    near = pos + (0.0 if other in self.controlled else MERGE_DEFER_M)
-                    if its >= near and not (other_speed > 0.0 and its * speed < pos * other_speed):
-                        continue
-                    gap = pos - its - float(veh.getLength(other)) - float(veh.getMinGap(vid))
-                    if best is not None and math.isinf(best_stop):
-                        best_stop = self._stop_point(best)
-                    stop = self._stop_at(gap, other_speed)
-                    if best is None or stop < best_stop:
-                        best, best_stop = (other, gap), stop
-                rest -= length
+        for name, rest, length, waits in self._merging_lanes(target, own):
+            for other in vehicles_on(name):
+                if other == vid:
+                    continue
+                if read_speed:
+                    speed, read_speed = float(get_speed(vid)), False
+                at = float(get_pos(other))
+                its = rest - at
+                other_speed = float(get_speed(other))
+                if waits and other_speed < HALT_SPEED_MPS and at > length - HALT_NEAR_M and other not in self.controlled:
+                    # A SUMO driver standing at the waiting point waits
+                    # for us: followed, neither goes (Bologna, junction
+                    # 50: a controlled vehicle turning right from the
+                    # major road stood 6.8 m from the merge behind a left
+                    # turner at its internal stop, 0.1 m from it, and the
+                    # queue behind stood until SUMO teleported it).
+                    continue
+                # Nearer the merge point (a SUMO driver: about as near),
+                # or sooner there at the speeds both have now.
+                near = pos + (0.0 if other in self.controlled else MERGE_DEFER_M)
+                if its >= near and not (other_speed > 0.0 and its * speed < pos * other_speed):
+                    continue
+                gap = pos - its - float(veh.getLength(other)) - float(veh.getMinGap(vid))
+                if best is not None and math.isinf(best_stop):
+                    best_stop = self._stop_point(best)
+                stop = self._stop_at(gap, other_speed)
+                if best is None or stop < best_stop:
+                    best, best_stop = (other, gap), stop
         return best
+
+    def _merging_lanes(self, target: str, own: str) -> list[tuple[str, float, float, bool]]:
+        """The lanes of the ways onto ``target`` other than the one through
+        ``own``, in order, each with the distance from its start to the
+        start of ``target`` (m), its length, and whether it is the junction
+        lane before an internal waiting point of a way our own has priority
+        over (its vehicles stop at its end for ours); kept per (target, own)."""
+        key = (target, own)
+        hit = self._merging.get(key)
+        if hit is None:
+            hit = []
+            for chain in self.network.ways_into(target):
+                if any(name == own for name, _ in chain):
+                    continue
+                rest = sum(length for _, length in chain)
+                for k, (name, length) in enumerate(chain):
+                    waits = k + 1 < len(chain) and name.startswith(":") and self._yields_to(name, own)
+                    hit.append((name, rest, length, waits))
+                    rest -= length
+            self._merging[key] = hit
+        return hit
+
+    def _yields_to(self, via: str, own: str) -> bool:
+        """Must the way through junction lane ``via`` give way to the one
+        through ``own`` (the network's right-of-way matrix)?"""
+        return any(lane == own for lane, *_ in self.network.prohibitors(via))
 
     def _stop_point(self, lead: Any) -> float:
         """How far ahead (m, as ``getLeader``'s gap) leader ``lead`` (id,
@@ -379,11 +479,14 @@ class Junctions:
         """The stop point of a leader ``gap`` ahead at ``speed`` (see ``_stop_point``)."""
         return gap + max(speed, 0.0) ** 2 / (2.0 * self.plan_decel)
 
-    def _way_to_merge(self, vid: str, lane: str, track_lanes: list[str]) -> tuple[str, str, Any] | None:
-        """For ``vid`` on SUMO lane ``lane``: (its junction lane ahead or
-        under it on its track, the lane its way through the junction leads
-        to, a function of its lane position giving its distance to that
-        lane's start) when that lane is one several ways merge onto; else None."""
+    def _way_to_merge(self, lane: str, track_lanes: list[str]) -> tuple[str, str, float, str | None] | None:
+        """For a vehicle on SUMO lane ``lane`` with the track ``track_lanes``:
+        (its junction lane ahead or under it on its track, the lane its way
+        through the junction leads to, that lane's start from the start of
+        ``lane`` or, with the fourth item, from the start of that item, the
+        track's junction lane beside ``lane``, on which blendtrack's front
+        position counts) when that lane is one several ways merge onto;
+        else None. Depends on the track and the network only."""
         if lane.startswith(":"):
             own = lane if lane in track_lanes else _track_lane_beside(lane, track_lanes)
             start = own
@@ -400,16 +503,14 @@ class Junctions:
                 own, target, ahead = further
             else:
                 target = after[-1][0]
-            if start != lane:
-                return own, target, lambda p: ahead - self._front_on(vid, start, p)
-            return own, target, lambda p: ahead - p
+            return own, target, ahead, (start if start != lane else None)
         if lane not in self.network.lanes_into_merges():
             return None
         found = self._merge_beyond(lane, track_lanes, 0.0, math.inf)
         if found is None:
             return None
         via, target, to_end = found
-        return via, target, lambda p: to_end - p
+        return via, target, to_end, None
 
     def _merge_beyond(self, lane: str, track_lanes: list[str], ahead: float,
                       limit: float = MERGE_LOOKAHEAD_M) -> tuple[str, str, float] | None:
@@ -573,7 +674,10 @@ class Junctions:
         the point. SUMO's ``getNextLinks`` reports foes arriving within about
         a second only, too late for a vehicle that needs five to cross from
         standstill at 1 m/s^2."""
-        foes = self.network.prohibitors(via)
+        foes = self._prohibitors.get(via)
+        if foes is None:
+            conflict = self.network.conflict
+            foes = self._prohibitors[via] = [(*foe, *conflict(via, foe[0])) for foe in self.network.prohibitors(via)]
         if not foes:
             return False
         veh = self.conn.sumo.vehicle
@@ -583,11 +687,11 @@ class Junctions:
         length = float(veh.getLength(vid))
         a = self.plan_accel
         patience = _Patience(self, vid, via, v, gap)
-        for foe, incoming, lane_length, tls, link in foes:
-            ours, theirs = self.network.conflict(via, foe)
+        for foe, incoming, lane_length, tls, link, ours, theirs in foes:
             dist = gap + ours + CONFLICT_CLEAR_M + length
             t_cross = (math.sqrt(v * v + 2.0 * a * dist) - v) / a + CROSS_MARGIN_S
-            if self._inside_in_time(vid, via, foe, t_cross, patience):
+            # (No vehicle on the foe lane: none inside it in the way.)
+            if vehicles_on(foe) and self._inside_in_time(vid, via, foe, t_cross, patience):
                 return True
             if incoming is None:
                 continue

@@ -339,6 +339,7 @@ class SumoRun:
         if self.opt.tactical_lane_changes and self.vehicles.order:
             self.lanes.tactical_changes(self.vehicles.order, self._steps)
         if self.conn.has_tls:
+            self.junctions.lights_anew = bool(self.step_hooks) or self.conn.backend != "libsumo"
             self.junctions.refresh_tls()
         # The lanes' vehicle lists from here on are read after this step's
         # lane changes and repairs, once, and shared by the leader look-ups
@@ -453,11 +454,14 @@ class SumoRun:
                     leaders[k] = None
                 if lane in fanouts:
                     leaders[k] = junctions.leader_at_fanout(ids[i], lane, order[i].geo.piece_lane, leaders[k])
-            elif not leaders[k] or not leaders[k][0]:
-                leaders[k] = junctions.leader_beyond(ids[i], order[i].geo.piece_lane, lane)
             else:
-                leaders[k] = junctions.leader_on_track(ids[i], order[i].geo.piece_lane, leaders[k], lane)
-            leaders[k] = junctions.leader_at_merge(ids[i], lane, order[i].geo.piece_lane, leaders[k])
+                if not leaders[k] or not leaders[k][0]:
+                    leaders[k] = junctions.leader_beyond(ids[i], order[i].geo.piece_lane, lane)
+                else:
+                    leaders[k] = junctions.leader_on_track(ids[i], order[i].geo.piece_lane, leaders[k], lane)
+                leaders[k] = junctions.leader_in_fanout(ids[i], lane, order[i].geo.piece_lane, leaders[k])
+            geo = order[i].geo
+            leaders[k] = junctions.leader_at_merge(ids[i], lane, geo.piece_lane, leaders[k], geo.memo)
         return ask, self.sumo_leaders.correct(leaders)
 
     # ------------------------------------------------------------------ apply
