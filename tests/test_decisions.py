@@ -110,6 +110,11 @@ class FakeConn:
         self.tc = tc
         self.errors = KeyError
         self.dt = 1.0
+        # Subscribed to the lights (TraCI, or a step hook); without, each
+        # light's state is read (``lights``, ``light_state``).
+        self.light_subscriptions = True
+        self.lights: tuple[str, ...] = ()
+        self.light_state = self.tls_now.__getitem__
 
     def vehicles_on(self, lane: str) -> list[str]:
         return self.lanes.get(lane, [])
@@ -659,6 +664,25 @@ def test_refresh_tls_passes_on_changed_lights_only() -> None:
     conn.tls_now.update(a="rr")
     j.refresh_tls()
     assert sent == [(0, "rr")]
+
+
+def test_refresh_tls_reads_each_light_where_none_is_subscribed() -> None:
+    """With libsumo and no step hook the lights are not subscribed to:
+    each light's state is read, and only the changed ones are passed on."""
+    conn = FakeConn()
+    conn.light_subscriptions = False
+    conn.lights = ("a", "b")
+    sent: list[tuple[int, str]] = []
+    fleet = SimpleNamespace(set_signal=lambda light, state: sent.append((light, state)))
+    tracks = SimpleNamespace(lights=SimpleNamespace(id={"a": 0, "b": 1}.__getitem__))
+    j = Junctions(conn, None, tracks, fleet, 4.0)  # type: ignore[arg-type]
+    conn.tls_now.update(a="Gr", b="rG")
+    j.refresh_tls()
+    assert sent == [(0, "Gr"), (1, "rG")]
+    sent.clear()
+    conn.tls_now.update(b="ry")
+    j.refresh_tls()
+    assert sent == [(1, "ry")] and j.tls_state == {"a": "Gr", "b": "ry"}
 
 
 def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tuple[Any, float] = (None, 0.0),

@@ -106,6 +106,19 @@ class SumoConnection:
         self.backend_note = ""
         self.dt = math.nan
         self.has_tls = False
+        #: Subscribe to every light's state (set before ``start``)? Needed
+        #: where a light can be switched between SUMO's step and the
+        #: control step's reading of it (TraCI, where another client may;
+        #: a step hook): the subscription then keeps the state SUMO's step
+        #: moved the vehicles under. With libsumo and no step hook nothing
+        #: can, and each light's state is read directly (``lights``,
+        #: ``light_state``): about 60 % fewer instructions for the lights
+        #: than subscribing to them and reading the subscriptions' dict.
+        self.subscribe_lights = True
+        #: The traffic lights (SUMO's ids, in ``getIDList``'s order).
+        self.lights: tuple[str, ...] = ()
+        #: Whether the lights are subscribed to in this simulation.
+        self.light_subscriptions = False
         # The hot loop's per-vehicle calls (see _bind_calls).
         self.get_leader: Any = None
         self.get_speed: Any = None
@@ -119,6 +132,7 @@ class SumoConnection:
         self.move_to_xy: Any = None
         self.lane_change_state: Any = None
         self.lane_vehicles: Any = None
+        self.light_state: Any = None
         self._lane_ids = _OnLane(self)
         #: SUMO's list of the vehicles on a lane this step, read once a step
         #: (several vehicles ask about the lanes of one junction): the
@@ -214,8 +228,11 @@ class SumoConnection:
                 f"(known: {', '.join(known)})"
             )
         lights = self.sumo.trafficlight.getIDList()
-        for tls in lights:
-            self.sumo.trafficlight.subscribe(tls, [tc.TL_RED_YELLOW_GREEN_STATE])
+        self.lights = tuple(lights)
+        self.light_subscriptions = self.subscribe_lights or self.backend != "libsumo"
+        if self.light_subscriptions:
+            for tls in lights:
+                self.sumo.trafficlight.subscribe(tls, [tc.TL_RED_YELLOW_GREEN_STATE])
         self.has_tls = bool(lights)
         self._bind_calls()
 
@@ -253,6 +270,8 @@ class SumoConnection:
         self.lane_change_state = pick("getLaneChangeState")
         lane_ids = getattr(raw, "lane_getLastStepVehicleIDs", None)
         self.lane_vehicles = lane_ids if callable(lane_ids) else self.sumo.lane.getLastStepVehicleIDs
+        state = getattr(raw, "trafficlight_getRedYellowGreenState", None)
+        self.light_state = state if callable(state) else self.sumo.trafficlight.getRedYellowGreenState
 
     def leader_speed(self, vid: str) -> float:
         """``vid``'s speed (a leader SUMO drives), read from SUMO once a step."""

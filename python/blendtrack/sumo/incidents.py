@@ -86,6 +86,9 @@ class Incidents:
         #: the vehicles, state when blendtrack's moves were pushed) of each
         #: crossing on r, u or y.
         self.crossings: list[tuple[float, str, str, int, str, str]] = []
+        #: Each light's state as read after this step's SUMO step, where the
+        #: lights are not subscribed to (``Junctions.tls_state``, set by the runner).
+        self.step_states: dict[str, str] = {}
         self.counts = {
             "signal_crossings_checked": 0,
             "red_light_crossings_sumo": 0,
@@ -175,7 +178,12 @@ class Incidents:
         step's end) and when blendtrack's moves were pushed (read now; another
         client may have switched the light in between)."""
         tl, tc = self.conn.sumo.trafficlight, self.conn.tc
-        moving = str(tl.getSubscriptionResults(tls).get(tc.TL_RED_YELLOW_GREEN_STATE, ""))
+        if self.conn.light_subscriptions:
+            moving = str(tl.getSubscriptionResults(tls).get(tc.TL_RED_YELLOW_GREEN_STATE, ""))
+        else:
+            # Not subscribed (libsumo, no step hook): the state read after
+            # SUMO's step by the control step (``step_states``) is the one.
+            moving = str(self.step_states.get(tls, ""))
         pushed = str(tl.getRedYellowGreenState(tls))
         a = moving[index] if 0 <= index < len(moving) else ""
         b = pushed[index] if 0 <= index < len(pushed) else ""

@@ -145,10 +145,20 @@ class Junctions:
         client) would be seen a step late. Both backends read it so then,
         so that they drive alike. Without (libsumo and no step hook:
         nothing can have switched a light since the step) the
-        subscription's value is the state now, and is taken as it is."""
+        subscription's value is the state now, and is taken as it is;
+        where the lights are not subscribed to (``SumoConnection.subscribe_lights``)
+        each is read, which gives the same state."""
         anew = self.lights_anew
         light = self.tracks.lights.id
         set_signal = self.fleet.set_signal
+        if not self.conn.light_subscriptions:
+            get_state, known = self.conn.light_state, self.tls_state
+            for tls in self.conn.lights:
+                state = get_state(tls)
+                if known.get(tls) != state:
+                    known[tls] = state
+                    set_signal(light(tls), state)
+            return
         tl = self.conn.sumo.trafficlight
         results = tl.getAllSubscriptionResults()
         key = self.conn.tc.TL_RED_YELLOW_GREEN_STATE

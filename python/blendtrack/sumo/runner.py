@@ -139,6 +139,7 @@ class SumoRun:
         #: goes when its vehicle arrives, so the set stays as small as the traffic).
         #: Red-light crossings, emergency brakings and teleports from SUMO's state.
         self.incidents = Incidents(self.conn, self.network)
+        self.incidents.step_states = self.junctions.tls_state
         self._seen: set[str] = set()
         #: Vehicles left to SUMO (not selected, or not drivable).
         self._background = 0
@@ -181,6 +182,9 @@ class SumoRun:
     # -------------------------------------------------------------------- run
     def run(self) -> RunResult:
         wall0 = time.perf_counter()
+        # A step hook may switch a light after SUMO's step: the lights'
+        # subscriptions then keep the state the step ran under.
+        self.conn.subscribe_lights = bool(self.step_hooks)
         self.conn.start()
         completed = False
         try:
