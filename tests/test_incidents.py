@@ -76,3 +76,47 @@ def test_plot_samples_fold_into_fixed_bins_whatever_the_run_length() -> None:
         h.add(np.tile([0.01, 5.0, 0.1, 0.0], (1000, 1)))
     assert h.n == 200_003 and int(h.error_counts.sum()) == h.n
     assert (h.error_counts.shape, h.speed_curvature_counts.shape) == shapes
+
+
+def test_stop_line_crossings_are_found_whether_or_not_the_vehicles_changed() -> None:
+    """A vehicle whose SUMO lane went from a normal lane to another lane
+    since the last check crossed a stop line there; from a junction lane,
+    or onto no lane, it did not. The same whether the runner's list of
+    vehicles is the one of the last check (compared in place) or a new one
+    (a vehicle came or went), and when a lane cannot be read."""
+    from types import SimpleNamespace
+
+    from blendtrack.sumo.incidents import Incidents
+
+    lanes: dict[str, str] = {}
+
+    def get_lane(vid: str) -> str:
+        return lanes[vid]  # a vehicle gone raises, as SUMO does
+
+    conn = SimpleNamespace(get_lane_id=get_lane)
+    inc = Incidents(conn, None)  # type: ignore[arg-type]
+    seen: list[tuple[str, str, str]] = []
+    # Every connection signalised, as the network's would be (no lane: none).
+    inc._link = lambda prev, now: (prev, now) if prev else None  # type: ignore[method-assign]
+    inc._check = lambda t, vid, rec, prev, now: seen.append((vid, prev, now))  # type: ignore[method-assign]
+    acts = [SimpleNamespace(record=None)] * 4
+    ids = ["a", "b", "c"]
+    lanes.update(a="e_0", b=":j_0_0", c="f_0")
+    inc._crossings(0.0, ids, acts)
+    assert seen == []
+    lanes.update(a=":j_1_0", b="g_0", c="")
+    inc._crossings(1.0, ids, acts)  # the same list: in place
+    assert seen == [("a", "e_0", ":j_1_0")]
+    seen.clear()
+    ids = ["d", "a", "c"]
+    lanes.update(a="h_0", c="k_0", d="m_0")
+    inc._crossings(2.0, ids, acts)  # a new list: by id ("c" was on no lane)
+    assert seen == []
+    lanes.update(a="n_0", c="p_0", d="q_0")
+    del lanes["d"]
+    inc._crossings(3.0, ids, acts)  # "d" gone
+    assert seen == [("a", "h_0", "n_0"), ("c", "k_0", "p_0")]
+    seen.clear()
+    lanes.update(a="r_0", c="s_0")
+    inc._crossings(4.0, ids, acts)  # the same list, but "d" unread last time
+    assert seen == [("a", "n_0", "r_0"), ("c", "p_0", "s_0")]

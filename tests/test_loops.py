@@ -195,3 +195,34 @@ def test_a_vehicle_moved_away_by_another_client_is_handed_back_and_counted(loop_
     # so it passes 5 m/s within 2 s; one left standing (a setSpeed in
     # force) never does.
     assert max(speed for _, _, speed in later) > 5.0
+
+
+def _placed_check(fronts: dict[str, tuple[float, float]]) -> Any:
+    """A ``PlacementCheck`` that put the vehicles' fronts at ``fronts`` last step."""
+    from blendtrack.sumo.faults import PlacementCheck
+
+    check = PlacementCheck(["l"], None)
+    ids = list(fronts)
+    n = len(ids)
+    out = {
+        "x_front_m": np.array([fronts[v][0] for v in ids]), "y_front_m": np.array([fronts[v][1] for v in ids]),
+        "past_route_end": np.zeros(n, dtype=bool), "lateral_error_m": np.zeros(n), "lane": np.zeros(n, dtype=np.int64),
+    }
+    check._widths = np.array([3.2])
+    check.note(ids, out, np.ones(n, dtype=bool), np.zeros(n, dtype=bool))
+    return check
+
+
+def test_a_front_more_than_jump_m_from_blendtracks_is_a_jump_in_the_vehicles_order() -> None:
+    from blendtrack.sumo.faults import JUMP_M
+
+    fronts = {v: (10.0 * k, 5.0) for k, v in enumerate("abcdef")}
+    check = _placed_check(fronts)
+    # SUMO's fronts: on the spot, just inside and just outside JUMP_M (along
+    # a diagonal), far off, NaN (no jump, as no comparison holds), and one
+    # blendtrack did not place (not checked).
+    d = JUMP_M / math.sqrt(2.0)
+    sumo_at = {"a": (0.0, 5.0), "b": (10.0 + d * 0.999, 5.0 + d * 0.999), "c": (20.0 + d * 1.001, 5.0 + d * 1.001),
+               "d": (1000.0, -3.0), "e": (math.nan, 5.0), "f": (50.0, 5.0)}
+    found = check.faults(["f", "e", "d", "c", "b", "a", "z"], None, None, sumo_at.__getitem__)
+    assert found == [("d", "jump"), ("c", "jump")]

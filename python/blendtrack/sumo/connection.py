@@ -273,6 +273,14 @@ class SumoConnection:
         state = getattr(raw, "trafficlight_getRedYellowGreenState", None)
         self.light_state = state if callable(state) else self.sumo.trafficlight.getRedYellowGreenState
 
+    def vehicles_on_lanes(self, lanes: list[str]) -> list[Any]:
+        """``vehicles_on`` of each of ``lanes``, the ones not read yet this
+        step read in one go."""
+        cache = self._lane_ids
+        missing = [lane for lane in dict.fromkeys(lanes) if lane not in cache]
+        dict.update(cache, zip(missing, map(self.lane_vehicles, missing)))
+        return list(map(cache.__getitem__, lanes))
+
     def leader_speed(self, vid: str) -> float:
         """``vid``'s speed (a leader SUMO drives), read from SUMO once a step."""
         v = self.leader_speeds.get(vid)

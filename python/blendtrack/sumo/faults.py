@@ -41,6 +41,7 @@ that (SUMO ahead, where ``moveTo`` cannot go back) is a fault.
 from __future__ import annotations
 
 import math
+from itertools import compress
 from typing import Any
 
 import numpy as np
@@ -135,9 +136,12 @@ class PlacementCheck:
             except Exception:
                 continue
         self._placed = []
-        seen = {vid for vid, _ in found}
         front = self._front
-        checked = [vid for vid in ids if vid in front and vid not in seen]
+        if found:
+            seen = {vid for vid, _ in found}
+            checked = [vid for vid in ids if vid in front and vid not in seen]
+        else:
+            checked = list(filter(front.__contains__, ids))
         if not checked:
             return found
         get_position = vehicle.getPosition if get_position is None else get_position
@@ -151,8 +155,9 @@ class PlacementCheck:
                     theirs.append(get_position(vid))
                 except Exception:
                     theirs.append((front[vid][0], front[vid][1]))
-        hypot = math.hypot
-        found.extend(
-            (vid, "jump") for vid, (x, y) in zip(checked, theirs) if hypot(x - front[vid][0], y - front[vid][1]) > JUMP_M
-        )
+        # math.dist(p, q) is math.hypot(px - qx, py - qy) to the bit (the
+        # same C code), here without a Python step per vehicle. A NaN
+        # distance is no jump (no comparison holds).
+        far = map(JUMP_M.__lt__, map(math.dist, theirs, map(front.__getitem__, checked)))
+        found.extend((vid, "jump") for vid in compress(checked, far))
         return found

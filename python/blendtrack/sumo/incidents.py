@@ -43,6 +43,8 @@ subscription), controlled or in the background.
 from __future__ import annotations
 
 import math
+from itertools import compress
+from operator import ne
 from typing import Any
 
 import numpy as np
@@ -69,8 +71,10 @@ class Incidents:
     def __init__(self, conn: SumoConnection, network: Network) -> None:
         self.conn = conn
         self.network = network
-        #: Each controlled vehicle's SUMO lane at the last check.
-        self._lane: dict[str, str] = {}
+        #: The controlled vehicles at the last check (the runner's list)
+        #: and their SUMO lanes then, in its order (None: not read).
+        self._lane_ids: list[str] = []
+        self._lanes: list[str | None] = []
         #: (from lane, to lane) -> (traffic light, link index) of the
         #: signalised connection between them, or None.
         self._links: dict[tuple[str, str], tuple[str, int] | None] = {}
@@ -152,21 +156,31 @@ class Incidents:
 
     def _crossings(self, t: float, ids: list[str], acts: list[Any]) -> None:
         get_lane = self.conn.get_lane_id or self.conn.sumo.vehicle.getLaneID
-        before = self._lane
+        prev_ids, prevs = self._lane_ids, self._lanes
+        complete = True
         try:
             lanes: list[str | None] = list(map(get_lane, ids))
         except Exception:
             # One is gone (dropped by the runner): the others one by one.
+            complete = False
             lanes = []
             for vid in ids:
                 try:
                     lanes.append(get_lane(vid))
                 except Exception:
                     lanes.append(None)
-        self._lane = {vid: lane for vid, lane in zip(ids, lanes) if lane is not None}
-        for i in [i for i, (vid, lane) in enumerate(zip(ids, lanes)) if lane and before.get(vid, lane) != lane]:
-            prev, now = before[ids[i]], lanes[i]
-            if prev.startswith(":") or now is None:
+        self._lane_ids, self._lanes = ids, lanes
+        if complete and ids is prev_ids and None not in prevs:
+            # The same vehicles in the same order as at the last check, and
+            # every lane read then and now (the usual case): compared in place.
+            moved = list(compress(range(len(ids)), map(ne, prevs, lanes)))
+            before = None
+        else:
+            before = {vid: lane for vid, lane in zip(prev_ids, prevs) if lane is not None}
+            moved = [i for i, (vid, lane) in enumerate(zip(ids, lanes)) if lane and before.get(vid, lane) != lane]
+        for i in moved:
+            prev, now = (prevs[i] if before is None else before[ids[i]]), lanes[i]
+            if not now or prev.startswith(":"):  # type: ignore[union-attr]
                 continue
             link = self._link(prev, now)
             if link is not None:

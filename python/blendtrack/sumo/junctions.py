@@ -78,6 +78,9 @@ IMPATIENT_DELAY_S = 30.0
 
 #: A memo's mark for a key not looked up yet (None is a value).
 _UNKNOWN = object()
+#: The same mark for callers that look in a ``leader_at_merge`` memo first
+#: (None there: no merge ahead of that lane on that track).
+NOT_LOOKED_UP = _UNKNOWN
 
 
 def _track_lane_beside(lane: str, track_lanes: list[str]) -> str:

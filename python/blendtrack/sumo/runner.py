@@ -52,6 +52,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from itertools import repeat
 from pathlib import Path
 from typing import Any
 
@@ -62,7 +63,7 @@ from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection, loads_ok_marker, sumo_binary
 from blendtrack.sumo.faults import ROUTE_INDEX_SLACK_M, PlacementCheck, repair
 from blendtrack.sumo.incidents import Incidents
-from blendtrack.sumo.junctions import YIELD_LOOKAHEAD_M, Junctions
+from blendtrack.sumo.junctions import NOT_LOOKED_UP, YIELD_LOOKAHEAD_M, Junctions
 from blendtrack.sumo.lanechange import LANE_CHANGE_ROOM_M, LaneChanges
 from blendtrack.sumo.network import Network
 from blendtrack.sumo.options import RunOptions
@@ -442,30 +443,33 @@ class SumoRun:
         of one per vehicle."""
         fleet, ids = self.fleet, self.vehicles.ids
         lanes = fleet.lanes_with_followers(self.vehicles.slots).tolist()
-        names, lane_vehicles = self.tracks.lanes.names, self.conn.vehicles_on
-        ask = fleet.leaders_on_lanes(self.vehicles.slots, lanes, [lane_vehicles(names[lane]) for lane in lanes]).tolist()
-        get_leader = self.conn.get_leader
-        leaders = [get_leader(ids[i], LEADER_RANGE_M) for i in ask]
+        names = self.tracks.lanes.names
+        ask = fleet.leaders_on_lanes(self.vehicles.slots, lanes, self.conn.vehicles_on_lanes([names[lane] for lane in lanes])).tolist()
+        asked = list(map(ids.__getitem__, ask))
+        # Reads only, so all the leaders first, then all the lanes.
+        leaders = list(map(self.conn.get_leader, asked, repeat(LEADER_RANGE_M)))
         order, junctions = self.vehicles.order, self.junctions
-        get_lane = self.conn.get_lane_id
         fanouts = self.network.fanouts() if ask else {}
-        for k, i in enumerate(ask):
+        for k, (i, vid, lane) in enumerate(zip(ask, asked, map(self.conn.get_lane_id, asked))):
             # Only a vehicle on a junction lane, or on a lane that fans out,
             # needs a second look.
-            lane = get_lane(ids[i])
-            if not lane.startswith(":"):
-                if not leaders[k] or not leaders[k][0]:
-                    leaders[k] = None
-                if lane in fanouts:
-                    leaders[k] = junctions.leader_at_fanout(ids[i], lane, order[i].geo.piece_lane, leaders[k])
-            else:
-                if not leaders[k] or not leaders[k][0]:
-                    leaders[k] = junctions.leader_beyond(ids[i], order[i].geo.piece_lane, lane)
-                else:
-                    leaders[k] = junctions.leader_on_track(ids[i], order[i].geo.piece_lane, leaders[k], lane)
-                leaders[k] = junctions.leader_in_fanout(ids[i], lane, order[i].geo.piece_lane, leaders[k])
+            lead = leaders[k]
             geo = order[i].geo
-            leaders[k] = junctions.leader_at_merge(ids[i], lane, geo.piece_lane, leaders[k], geo.memo)
+            if not lane.startswith(":"):
+                if not lead or not lead[0]:
+                    lead = None
+                if lane in fanouts:
+                    lead = junctions.leader_at_fanout(vid, lane, geo.piece_lane, lead)
+            else:
+                if not lead or not lead[0]:
+                    lead = junctions.leader_beyond(vid, geo.piece_lane, lane)
+                else:
+                    lead = junctions.leader_on_track(vid, geo.piece_lane, lead, lane)
+                lead = junctions.leader_in_fanout(vid, lane, geo.piece_lane, lead)
+            # (A lane known to have no merge ahead on this track: nothing to look for.)
+            if geo.memo.get(lane, NOT_LOOKED_UP) is not None:
+                lead = junctions.leader_at_merge(vid, lane, geo.piece_lane, lead, geo.memo)
+            leaders[k] = lead
         return ask, self.sumo_leaders.correct(leaders)
 
     # ------------------------------------------------------------------ apply
