@@ -685,6 +685,32 @@ def test_refresh_tls_reads_each_light_where_none_is_subscribed() -> None:
     assert sent == [(1, "ry")] and j.tls_state == {"a": "Gr", "b": "ry"}
 
 
+def test_a_lanes_vehicles_are_read_from_sumo_once_a_step() -> None:
+    """``SumoConnection.vehicles_on``: SUMO's list of a lane's vehicles is
+    read on first use in a step and kept for the step's later look-ups."""
+    from blendtrack.sumo.connection import SumoConnection
+
+    reads: list[str] = []
+    on = {"a_0": ("x", "y"), "b_0": ()}
+
+    class Domain:
+        def __getattr__(self, name: str) -> Any:
+            return lambda *args: None
+
+    lane = SimpleNamespace(getLastStepVehicleIDs=lambda ln: reads.append(ln) or on[ln])
+    conn = SumoConnection.__new__(SumoConnection)
+    conn.backend = "traci"
+    conn.sumo = SimpleNamespace(vehicle=Domain(), lane=lane, trafficlight=Domain())
+    conn.leader_speeds = {}
+    conn._bind_calls()
+    assert conn.vehicles_on("a_0") == ("x", "y") and conn.vehicles_on("b_0") == ()
+    assert conn.vehicles_on_lanes(["b_0", "a_0", "a_0"]) == [(), ("x", "y"), ("x", "y")]
+    assert reads == ["a_0", "b_0"]
+    on["a_0"] = ("y",)
+    conn.new_step()
+    assert conn.vehicles_on("a_0") == ("y",) and reads == ["a_0", "b_0", "a_0"]
+
+
 def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tuple[Any, float] = (None, 0.0),
                 light: int = -1) -> tuple[FakeConn, Junctions, dict[str, Any]]:
     conn = FakeConn()
