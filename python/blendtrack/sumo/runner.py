@@ -15,8 +15,8 @@ route, stop-line decisions and statistics in Rust. Each simulation step:
    (:mod:`blendtrack.sumo.geometry`), shared by every vehicle on the same
    route and lane, registered once with its lane pieces and stop lines.
 3. The leader of every controlled vehicle is read from SUMO (its gap; its
-   speed unless blendtrack drives it too), and traffic-light states from one
-   subscription per light. ``RouteFleet.plan`` turns red and yellow lights,
+   speed unless blendtrack drives it too), and traffic-light states (each
+   light's, read after SUMO's step). ``RouteFleet.plan`` turns red and yellow lights,
    links without priority, blocked junction exits and the route's end into
    stop lines; for links without priority it asks which vehicles must
    check SUMO for approaching foes (``getNextLinks``).
