@@ -180,7 +180,7 @@ class Incidents:
             moved = [i for i, (vid, lane) in enumerate(zip(ids, lanes)) if lane and before.get(vid, lane) != lane]
         for i in moved:
             prev, now = (prevs[i] if before is None else before[ids[i]]), lanes[i]
-            if not now or prev.startswith(":"):  # type: ignore[union-attr]
+            if not now or prev is None or prev.startswith(":"):
                 continue
             link = self._link(prev, now)
             if link is not None:
