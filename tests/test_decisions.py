@@ -605,6 +605,99 @@ def test_internal_junction_busy_with_a_foe_inside_or_near() -> None:
     assert j.internal_junction_busy("me", ":j_w")
 
 
+def test_a_held_foe_a_turner_went_on_stays_held_until_the_turner_is_through() -> None:
+    """The race traced on the shipped grid (junction D1): a left turner went
+    from its waiting point because the oncoming controlled vehicle stood
+    held at its line, and in the same step that vehicle was let go; 2.6 s
+    later they met. Now the turner going records the hold; the held vehicle
+    is kept at its line while the turner is on the edge it went from or on
+    a junction lane, and not told to wait since; released otherwise (and
+    then not counted as held by anyone this step). A vehicle already let
+    go this step is no held foe for a turner deciding after it."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="in_w_0")
+    v.add("o", pos=49.0, speed=0.0, lane="in_0")
+    conn.lanes = {"in_0": ["o"]}
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "", -1)])
+    j.controlled = {"me": None, "o": None}
+    front = {"o": 49.0}
+    j.fleet = SimpleNamespace(next_stop=lambda slot: (50.0,), s_front=lambda slot: front["o"])  # type: ignore[assignment]
+    j._must_yield = lambda vid, slot: False  # type: ignore[method-assign]
+    # Not held last step: the standing foe 1 m from its line makes the turner wait.
+    assert j.internal_junction_busy("me", ":j_w")
+    assert j.holds == {}
+    # Held last step: the turner goes and counts on it.
+    j.waiting = {"o"}
+    assert not j.internal_junction_busy("me", ":j_w")
+    assert j.holds == {"o": ("me", "in_w")}
+    # Its own answer is "go", yet it stays: the turner is on its edge, then in the junction.
+    assert j.must_yield("o", 0)
+    j.new_step()
+    v.cars["me"]["lane"] = ":j_w_0"
+    assert j.must_yield("o", 0) and "o" in j._waiting_now
+    # The turner told to wait since (at its point, for another foe): released.
+    j.new_step()
+    j._waiting_now.add("me")
+    assert not j.must_yield("o", 0) and j.holds == {}
+    # Held again; the turner out of the junction onto the next edge: released.
+    j.holds = {"o": ("me", "in_w")}
+    j.new_step()
+    j.new_step()  # the turner's wait is two steps back now
+    assert j.must_yield("o", 0)
+    v.cars["me"]["lane"] = "out_w_0"
+    assert not j.must_yield("o", 0) and j.holds == {}
+    # A held vehicle whose front is already past its line is never kept there.
+    j.holds = {"o": ("me", "in_w")}
+    v.cars["me"]["lane"] = ":j_w_0"
+    front["o"] = 50.5
+    assert not j.must_yield("o", 0) and j.holds == {}
+    # Let go this step before the turner decides: no held foe for it.
+    front["o"] = 49.0
+    j.new_step()
+    j.waiting = {"o"}
+    assert not j.must_yield("o", 0)
+    assert j.internal_junction_busy("me", ":j_w")
+    assert j.holds == {}
+
+
+def test_a_vehicle_just_over_its_line_that_can_stop_is_still_asked() -> None:
+    """Braking for its internal waiting point, a left turner on the grid
+    stopped 4 cm past it, was taken as in the junction and went on into the
+    oncoming vehicle. Past its waiting point by under 0.5 m (the Rust plan
+    keeps the stop that long) and able to stop within those 0.5 m at the
+    planning deceleration (4 m/s^2: v^2 <= 8 (0.5 - past)), it is still
+    asked; further past, or too fast, or past a junction's entry line, it is
+    in and clears the junction."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", speed=0.8)
+    v.add("o", pos=45.0, speed=10.0, lane="in_0")
+    conn.lanes = {"in_0": ["o"]}
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "", -1)])
+    j.network.is_zipper = lambda via: False
+    j.tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda i: ":j_w"))  # type: ignore[assignment]
+    front = {"me": 99.0}
+    j.fleet = SimpleNamespace(next_stop=lambda slot: (100.0, 0, 0, 0, 7), s_front=lambda slot: front["me"])  # type: ignore[assignment]
+    assert j.must_yield("me", 0), "before its line, with a foe 0.5 s away"
+    front["me"] = 100.04
+    assert j.must_yield("me", 0), "4 cm over at 0.8 m/s: it can stop"
+    boundary = math.sqrt(8.0 * (0.5 - 0.04))
+    v.cars["me"]["speed"] = boundary - 1e-6
+    assert j.must_yield("me", 0)
+    v.cars["me"]["speed"] = boundary + 1e-6
+    assert not j.must_yield("me", 0), "too fast to stop within 0.5 m: in"
+    v.cars["me"]["speed"] = 0.0
+    front["me"] = 100.5
+    assert not j.must_yield("me", 0), "0.5 m over: in"
+    # Over a junction's entry line (no internal waiting point), any distance
+    # over is in: a vehicle crossing a stream, asked again there, stood.
+    front["me"] = 100.04
+    assert j.must_yield("me", 0)
+    j.network.internal_vias = set()
+    assert not j.must_yield("me", 0)
+
+
 def test_internal_junction_busy_reads_the_foes_light() -> None:
     """Foe at 23 m from its line at 13.8 m/s (the traced case): at yellow it
     needs 13.8 * 1 + 13.8^2 / 6 = 45.5 m to stop, so it comes through; at

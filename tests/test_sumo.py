@@ -226,6 +226,22 @@ def test_grid_stops_for_red_lights_and_follows_leaders(grid: tuple[Path, sumo.Ru
     assert rear_ends == [], rear_ends
 
 
+def test_grid_with_every_vehicle_pulling_away_at_the_vtypes_accel_has_no_junction_collision(tmp_path: Path) -> None:
+    """The same grid with every vehicle pulling away at 2.6 m/s^2 (the
+    vType's accel, not the default): two junction collisions at D1 in
+    300 s before a turner's count on a held oncoming vehicle kept it held
+    (184.5 s) and a turner 4 cm past its waiting point was still asked
+    (220.4 s); none since."""
+    sc = sumo.resolve_scenario("urban_grid")
+    cfg = blendtrack.ControllerConfig().replace(preferred_acceleration=2.6)
+    opts = RunOptions(controlled_fraction=1.0, end_s=300, progress=False, config=cfg,
+                      fixed_keys=frozenset({"preferred_acceleration"}))
+    result = SumoRun(sc, opts, tmp_path).run()
+    assert result.summary["controlled_vehicles"] >= _scheduled("urban_grid", 240.0)
+    assert _collisions(tmp_path) == []
+    assert result.summary["teleports"] == 0
+
+
 def test_grid_with_every_vehicle_controlled_has_no_junction_collision(tmp_path: Path) -> None:
     """Left turns across oncoming lanes wait at the internal junction (SUMO does
     not see vehicles moved by blendtrack approach it, so the check is ours),

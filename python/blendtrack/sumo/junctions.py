@@ -29,6 +29,10 @@ YELLOW_RUN_REACTION_S = 1.0
 YELLOW_RUN_DECEL_MPS2 = 3.0
 #: Where a vehicle stops short of a waiting point it must stop at (m).
 STOP_MARGIN_M = 1.0
+#: A vehicle whose front is past its internal waiting point by less than
+#: this (m), and that could stop within it, is still asked whether to wait:
+#: the Rust plan keeps a stop until the front is 0.5 m past it.
+STOP_PASSED_M = 0.5
 #: Share of the planning deceleration a turner should need to stop at its
 #: internal waiting point once past the entry line.
 ENTRY_SLOW_DECEL = 0.5
@@ -123,6 +127,13 @@ class Junctions:
         #: this step's so far (``new_step`` moves them over).
         self.waiting: set[str] = set()
         self._waiting_now: set[str] = set()
+        #: The controlled vehicles told this step that they may go.
+        self._going_now: set[str] = set()
+        #: A controlled vehicle held at its line -> the turner that went
+        #: counting on it staying there, and the edge the turner was on then
+        #: (``internal_junction_busy``; kept while the turner is on that
+        #: edge or inside a junction, see ``must_yield``).
+        self.holds: dict[str, tuple[str, str]] = {}
         #: The controlled vehicles (the runner's dict of them, by id).
         self.controlled: Any = {} if controlled is None else controlled
         #: Per vehicle that went impatient: the junction lane it goes
@@ -137,6 +148,7 @@ class Junctions:
     def new_step(self) -> None:
         """This step's yield answers begin: last step's waiters are known."""
         self.waiting, self._waiting_now = self._waiting_now, set()
+        self._going_now = set()
 
     def refresh_tls(self) -> None:
         """Passes the lights that changed this step to the RouteFleet.
@@ -175,21 +187,56 @@ class Junctions:
         """SUMO's view of the link ahead: does it lack priority with foes
         approaching? (The vehicles told so are noted: ``waiting``.)"""
         wait = self._must_yield(vid, slot)
+        if not wait and vid in self.holds:
+            wait = self._held_for_turner(vid, slot)
         if wait:
             self._waiting_now.add(vid)
+        else:
+            self._going_now.add(vid)
         return wait
+
+    def _held_for_turner(self, vid: str, slot: int) -> bool:
+        """``vid``, standing at its line, was counted on by a turner that went
+        from its internal waiting point (``holds``): it stays while that
+        turner is still on its way, on the edge it went from or inside a
+        junction, and not told to wait since. Released in the same step,
+        it had driven into the turner's way: on the shipped grid a left
+        turner went because the oncoming vehicle was held, and the oncoming
+        vehicle was let go in that very step (junction D1, a collision
+        2.6 s later when it pulled away at 2.6 m/s^2)."""
+        turner, edge = self.holds[vid]
+        stop = self.fleet.next_stop(slot)
+        if stop is not None and stop[0] >= self.fleet.s_front(slot) and turner in self.controlled \
+                and turner not in self.waiting and turner not in self._waiting_now:
+            try:
+                road = str(self.conn.sumo.vehicle.getRoadID(turner))
+            except self.conn.errors:
+                road = ""
+            if road.startswith(":") or road == edge:
+                return True
+        del self.holds[vid]
+        return False
 
     def _must_yield(self, vid: str, slot: int) -> bool:
         stop = self.fleet.next_stop(slot)
         if stop is None:
             return False
-        if stop[0] < self.fleet.s_front(slot):
+        via = self.tracks.lanes.name(stop[4])
+        past = self.fleet.s_front(slot) - stop[0]
+        if past > 0.0 and (past >= STOP_PASSED_M or via not in self.network.internal_vias
+                           or self.conn.get_speed(vid) ** 2 > 2.0 * self.plan_decel * (STOP_PASSED_M - past)):
             # Its front is past the line (a step of 1 s can carry it there
             # while the way was clear): it is in, and clears the junction.
-            # Told to wait it stood there, in the crossing road's way.
+            # Told to wait it stood there, in the crossing road's way. Just
+            # over an internal waiting point and able to stop within
+            # STOP_PASSED_M of it, it is still asked (the Rust plan keeps
+            # the stop until then): braking for it, a left turner on the
+            # grid stopped 4 cm past it, went on as if in, and met the
+            # oncoming vehicle. (Not at a junction's entry: a vehicle
+            # crossing a stream as SUMO's impatient drivers do, asked again
+            # just over its line, stood there.)
             self.went.pop(vid, None)
             return False
-        via = self.tracks.lanes.name(stop[4])
         if self.network.is_zipper(via):
             # Taken in turns, not waited at: the order comes from ``Zippers``
             # as a soft leader (a zipper link without a light is listed
@@ -642,7 +689,8 @@ class Junctions:
         whose next link SUMO says lacks priority with a foe (the rule
         ``must_yield`` applies to controlled vehicles)?"""
         if other in self.waiting:
-            return True
+            # Unless it was told this step that it may go.
+            return other not in self._going_now
         if other in self.controlled:
             return False
         try:
@@ -655,6 +703,7 @@ class Junctions:
         """``vid`` is no longer controlled."""
         self.halted.pop(vid, None)
         self.went.pop(vid, None)
+        self.holds.pop(vid, None)
 
     def allway_busy(self, vid: str, via: str) -> bool:
         """At an all-way stop, halted at the line: a foe inside the junction
@@ -776,6 +825,8 @@ class Junctions:
         """
         vehicles_on, get_speed, get_pos = self.conn.vehicles_on, self.conn.get_speed, self.conn.get_lane_pos
         patience = None if gap is None else _Patience(self, vid, via, max(float(get_speed(vid)), 0.0), gap)
+        # Controlled foes held at their line, counted on if the vehicle goes.
+        counted_on: list[str] = []
         for foe, incoming, length, tls, link in (self.network.internal_foes(via) if foes is None else foes):
             if self._inside_in_time(vid, via, foe, horizon_s, patience):
                 return True
@@ -799,7 +850,10 @@ class Junctions:
                     # while this one is in there. Counted as about to
                     # enter, the two waited for each other until SUMO
                     # teleported them (Bologna, junctions 50 and 51: 300 s,
-                    # in each of three seeds).
+                    # in each of three seeds). A controlled one is kept
+                    # there while this one goes (``holds``).
+                    if other in self.controlled:
+                        counted_on.append(other)
                     continue
                 if yellow:
                     # At yellow a foe stops only if it can: one too close
@@ -812,6 +866,13 @@ class Junctions:
                     arrive = 0.0 if dist < INTERNAL_YIELD_NEAR_M else dist / max(speed, 1e-9)
                     if patience is None or not patience.lets_go(other, dist, speed, arrive, horizon_s):
                         return True
+        if counted_on:
+            try:
+                edge = str(self.conn.sumo.vehicle.getRoadID(vid))
+            except self.conn.errors:
+                return False
+            for other in counted_on:
+                self.holds[other] = (vid, edge)
         return False
 
 
