@@ -610,10 +610,11 @@ def test_a_held_foe_a_turner_went_on_stays_held_until_the_turner_is_through() ->
     from its waiting point because the oncoming controlled vehicle stood
     held at its line, and in the same step that vehicle was let go; 2.6 s
     later they met. Now the turner going records the hold; the held vehicle
-    is kept at its line while the turner is on the edge it went from or on
-    a junction lane, and not told to wait since; released otherwise (and
-    then not counted as held by anyone this step). A vehicle already let
-    go this step is no held foe for a turner deciding after it."""
+    is kept at its line into that junction while the turner is on the edge
+    it went from or on a lane of that junction, and not told to wait since;
+    released otherwise (and then not counted as held by anyone this step).
+    A vehicle already let go this step is no held foe for a turner deciding
+    after it."""
     conn = FakeConn()
     v = conn.vehicle
     v.add("me", lane="in_w_0")
@@ -622,7 +623,9 @@ def test_a_held_foe_a_turner_went_on_stays_held_until_the_turner_is_through() ->
     j = junctions(conn, [(":j_foe", "in_0", 50.0, "", -1)])
     j.controlled = {"me": None, "o": None}
     front = {"o": 49.0}
-    j.fleet = SimpleNamespace(next_stop=lambda slot: (50.0,), s_front=lambda slot: front["o"])  # type: ignore[assignment]
+    via = {"o": ":j_foe_0"}  # the held vehicle's next junction lane
+    j.fleet = SimpleNamespace(next_stop=lambda slot: (50.0, 0, 0, 0, 7), s_front=lambda slot: front["o"])  # type: ignore[assignment]
+    j.tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda i: via["o"]))  # type: ignore[assignment]
     j._must_yield = lambda vid, slot: False  # type: ignore[method-assign]
     # Not held last step: the standing foe 1 m from its line makes the turner wait.
     assert j.internal_junction_busy("me", ":j_w")
@@ -630,7 +633,7 @@ def test_a_held_foe_a_turner_went_on_stays_held_until_the_turner_is_through() ->
     # Held last step: the turner goes and counts on it.
     j.waiting = {"o"}
     assert not j.internal_junction_busy("me", ":j_w")
-    assert j.holds == {"o": ("me", "in_w")}
+    assert j.holds == {"o": ("me", "in_w", ":j_")}
     # Its own answer is "go", yet it stays: the turner is on its edge, then in the junction.
     assert j.must_yield("o", 0)
     j.new_step()
@@ -641,14 +644,25 @@ def test_a_held_foe_a_turner_went_on_stays_held_until_the_turner_is_through() ->
     j._waiting_now.add("me")
     assert not j.must_yield("o", 0) and j.holds == {}
     # Held again; the turner out of the junction onto the next edge: released.
-    j.holds = {"o": ("me", "in_w")}
+    j.holds = {"o": ("me", "in_w", ":j_")}
     j.new_step()
     j.new_step()  # the turner's wait is two steps back now
     assert j.must_yield("o", 0)
     v.cars["me"]["lane"] = "out_w_0"
     assert not j.must_yield("o", 0) and j.holds == {}
+    # Held again; the turner inside another junction: released.
+    j.holds = {"o": ("me", "in_w", ":j_")}
+    v.cars["me"]["lane"] = ":k_3_0"
+    assert not j.must_yield("o", 0) and j.holds == {}
+    # Held again, the turner in the junction, but the held vehicle's next
+    # line is into another junction (a hold left over): released.
+    j.holds = {"o": ("me", "in_w", ":j_")}
+    v.cars["me"]["lane"] = ":j_w_0"
+    via["o"] = ":k_1_0"
+    assert not j.must_yield("o", 0) and j.holds == {}
+    via["o"] = ":j_foe_0"
     # A held vehicle whose front is already past its line is never kept there.
-    j.holds = {"o": ("me", "in_w")}
+    j.holds = {"o": ("me", "in_w", ":j_")}
     v.cars["me"]["lane"] = ":j_w_0"
     front["o"] = 50.5
     assert not j.must_yield("o", 0) and j.holds == {}

@@ -130,10 +130,11 @@ class Junctions:
         #: The controlled vehicles told this step that they may go.
         self._going_now: set[str] = set()
         #: A controlled vehicle held at its line -> the turner that went
-        #: counting on it staying there, and the edge the turner was on then
-        #: (``internal_junction_busy``; kept while the turner is on that
-        #: edge or inside a junction, see ``must_yield``).
-        self.holds: dict[str, tuple[str, str]] = {}
+        #: counting on it staying there, the edge the turner was on then and
+        #: the prefix of that junction's lane ids (``internal_junction_busy``;
+        #: kept while the turner is on that edge or in that junction, see
+        #: ``must_yield``).
+        self.holds: dict[str, tuple[str, str, str]] = {}
         #: The controlled vehicles (the runner's dict of them, by id).
         self.controlled: Any = {} if controlled is None else controlled
         #: Per vehicle that went impatient: the junction lane it goes
@@ -197,22 +198,24 @@ class Junctions:
 
     def _held_for_turner(self, vid: str, slot: int) -> bool:
         """``vid``, standing at its line, was counted on by a turner that went
-        from its internal waiting point (``holds``): it stays while that
-        turner is still on its way, on the edge it went from or inside a
-        junction, and not told to wait since. Released in the same step,
+        from its internal waiting point (``holds``): it stays at its line
+        into that junction while that turner is still on its way, on the
+        edge it went from or inside that junction, and not told to wait
+        since. Released in the same step,
         it had driven into the turner's way: on the shipped grid a left
         turner went because the oncoming vehicle was held, and the oncoming
         vehicle was let go in that very step (junction D1, a collision
         2.6 s later when it pulled away at 2.6 m/s^2)."""
-        turner, edge = self.holds[vid]
+        turner, edge, junction = self.holds[vid]
         stop = self.fleet.next_stop(slot)
         if stop is not None and stop[0] >= self.fleet.s_front(slot) and turner in self.controlled \
-                and turner not in self.waiting and turner not in self._waiting_now:
+                and turner not in self.waiting and turner not in self._waiting_now \
+                and self.tracks.lanes.name(stop[4]).startswith(junction):
             try:
                 road = str(self.conn.sumo.vehicle.getRoadID(turner))
             except self.conn.errors:
                 road = ""
-            if road.startswith(":") or road == edge:
+            if road.startswith(junction) or road == edge:
                 return True
         del self.holds[vid]
         return False
@@ -871,8 +874,10 @@ class Junctions:
                 edge = str(self.conn.sumo.vehicle.getRoadID(vid))
             except self.conn.errors:
                 return False
+            # ":J_3_0" (junction J's lane) -> ":J_", the prefix of J's lane and edge ids.
+            junction = via.rsplit("_", 2)[0] + "_"
             for other in counted_on:
-                self.holds[other] = (vid, edge)
+                self.holds[other] = (vid, edge, junction)
         return False
 
 
