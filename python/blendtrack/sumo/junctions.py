@@ -80,11 +80,9 @@ INSIDE_MARGIN_M = 0.3
 IMPATIENT_DELAY_S = 30.0
 
 
-#: A memo's mark for a key not looked up yet (None is a value).
-_UNKNOWN = object()
-#: The same mark for callers that look in a ``leader_at_merge`` memo first
-#: (None there: no merge ahead of that lane on that track).
-NOT_LOOKED_UP = _UNKNOWN
+#: A ``leader_at_merge`` memo's mark for a lane not looked up yet (None
+#: there is a value: no merge ahead of that lane on that track).
+NOT_LOOKED_UP = object()
 
 
 def _track_lane_beside(lane: str, track_lanes: list[str]) -> str:
@@ -456,8 +454,8 @@ class Junctions:
         if memo is None:
             way = self._way_to_merge(lane, track_lanes)
         else:
-            way = memo.get(lane, _UNKNOWN)
-            if way is _UNKNOWN:
+            way = memo.get(lane, NOT_LOOKED_UP)
+            if way is NOT_LOOKED_UP:
                 way = memo[lane] = self._way_to_merge(lane, track_lanes)
         if way is None:
             return lead
