@@ -36,6 +36,7 @@ use crate::error::ConfigError;
 use crate::longitudinal::Obstacle;
 use crate::path::Path;
 use crate::vehicle::{advance, Command, HeadingTrig, VehicleParams, VehicleState};
+use std::mem::MaybeUninit;
 use std::sync::Arc;
 use thiserror::Error;
 
@@ -498,28 +499,11 @@ impl Fleet {
         // Each vehicle's outputs go straight into their columns: a parallel
         // step splits the vehicles and every column at the same index, so
         // each thread writes its own part (no row array to transpose after).
-        let mut out = FleetOutputs {
-            ok: vec![false; n],
-            steering_rad: vec![f64::NAN; n],
-            accel_mps2: vec![f64::NAN; n],
-            alpha: vec![f64::NAN; n],
-            lateral_error_m: vec![f64::NAN; n],
-            heading_error_rad: vec![f64::NAN; n],
-            s_m: vec![f64::NAN; n],
-            s_rear_m: vec![f64::NAN; n],
-            lateral_error_rear_m: vec![f64::NAN; n],
-            lateral_error_front_m: vec![f64::NAN; n],
-            curvature_per_m: vec![f64::NAN; n],
-            virtual_obstacle_m: vec![f64::NAN; n],
-            next: inp.dt_s.map(|_| NextStates {
-                x_m: vec![f64::NAN; n],
-                y_m: vec![f64::NAN; n],
-                theta_rad: vec![f64::NAN; n],
-                v_mps: vec![f64::NAN; n],
-                delta_rad: vec![f64::NAN; n],
-            }),
-        };
-        let cols = Columns::of(&mut out);
+        // The columns are allocated but not filled: each row is written once,
+        // by the thread that steps its vehicle (NaN for a failed one), so no
+        // thread fills 1.3 MB (10,000 vehicles) before the others can start.
+        let mut out = FleetOutputs::unwritten(n, inp.dt_s.is_some());
+        let cols = Columns::of(&mut out, n);
         if n < PARALLEL_MIN_VEHICLES || self.threads == 1 {
             step_range(&mut entries, 0, cols, inp, false);
         } else {
@@ -531,6 +515,10 @@ impl Fleet {
                 None => work(),
             }
         }
+        // SAFETY: `step_range` wrote every row of `cols`, the columns' first
+        // `n` entries (a panic in it unwinds past this line, the columns
+        // still empty).
+        unsafe { out.set_written(n) };
         Ok(out)
     }
 }
@@ -539,87 +527,149 @@ impl Fleet {
 /// microseconds of work, so a 10,000-vehicle step splits into a few dozen.
 const PARALLEL_GRAIN: usize = 256;
 
-/// The output columns of the vehicles of one part of a step (`next` empty
-/// without a time step).
+impl FleetOutputs {
+    /// Empty columns with room for `n` entries (and the next states' when
+    /// `next`), for [`Columns::of`] to write.
+    fn unwritten(n: usize, next: bool) -> Self {
+        let col = || Vec::with_capacity(n);
+        FleetOutputs {
+            ok: Vec::with_capacity(n),
+            steering_rad: col(),
+            accel_mps2: col(),
+            alpha: col(),
+            lateral_error_m: col(),
+            heading_error_rad: col(),
+            s_m: col(),
+            s_rear_m: col(),
+            lateral_error_rear_m: col(),
+            lateral_error_front_m: col(),
+            curvature_per_m: col(),
+            virtual_obstacle_m: col(),
+            next: next.then(|| NextStates {
+                x_m: col(),
+                y_m: col(),
+                theta_rad: col(),
+                v_mps: col(),
+                delta_rad: col(),
+            }),
+        }
+    }
+
+    /// Sets the length of every column to `n`.
+    ///
+    /// # Safety
+    ///
+    /// The first `n` entries of every column (their spare capacity after
+    /// [`FleetOutputs::unwritten`]) are written: `Columns::of(self, n)` was
+    /// passed whole to [`step_range`] and it returned.
+    unsafe fn set_written(&mut self, n: usize) {
+        self.ok.set_len(n);
+        for c in [
+            &mut self.steering_rad,
+            &mut self.accel_mps2,
+            &mut self.alpha,
+            &mut self.lateral_error_m,
+            &mut self.heading_error_rad,
+            &mut self.s_m,
+            &mut self.s_rear_m,
+            &mut self.lateral_error_rear_m,
+            &mut self.lateral_error_front_m,
+            &mut self.curvature_per_m,
+            &mut self.virtual_obstacle_m,
+        ] {
+            c.set_len(n);
+        }
+        if let Some(next) = &mut self.next {
+            for c in [
+                &mut next.x_m,
+                &mut next.y_m,
+                &mut next.theta_rad,
+                &mut next.v_mps,
+                &mut next.delta_rad,
+            ] {
+                c.set_len(n);
+            }
+        }
+    }
+}
+
+/// The output columns of the vehicles of one part of a step, not yet
+/// written (`next` None without a time step).
 struct Columns<'a> {
-    ok: &'a mut [bool],
-    f: [&'a mut [f64]; 11],
-    next: [&'a mut [f64]; 5],
+    ok: &'a mut [MaybeUninit<bool>],
+    f: [&'a mut [MaybeUninit<f64>]; 11],
+    next: Option<[&'a mut [MaybeUninit<f64>]; 5]>,
 }
 
 impl<'a> Columns<'a> {
-    fn of(out: &'a mut FleetOutputs) -> Self {
-        let next = match &mut out.next {
-            Some(n) => [
-                &mut n.x_m[..],
-                &mut n.y_m[..],
-                &mut n.theta_rad[..],
-                &mut n.v_mps[..],
-                &mut n.delta_rad[..],
-            ],
-            None => [
-                &mut [][..],
-                &mut [][..],
-                &mut [][..],
-                &mut [][..],
-                &mut [][..],
-            ],
-        };
+    /// The first `n` entries of the spare capacity of every column of `out`
+    /// (from [`FleetOutputs::unwritten`]).
+    fn of(out: &'a mut FleetOutputs, n: usize) -> Self {
+        fn spare<T>(c: &mut Vec<T>, n: usize) -> &mut [MaybeUninit<T>] {
+            &mut c.spare_capacity_mut()[..n]
+        }
         Columns {
-            ok: &mut out.ok,
+            ok: spare(&mut out.ok, n),
             f: [
-                &mut out.steering_rad,
-                &mut out.accel_mps2,
-                &mut out.alpha,
-                &mut out.lateral_error_m,
-                &mut out.heading_error_rad,
-                &mut out.s_m,
-                &mut out.s_rear_m,
-                &mut out.lateral_error_rear_m,
-                &mut out.lateral_error_front_m,
-                &mut out.curvature_per_m,
-                &mut out.virtual_obstacle_m,
+                spare(&mut out.steering_rad, n),
+                spare(&mut out.accel_mps2, n),
+                spare(&mut out.alpha, n),
+                spare(&mut out.lateral_error_m, n),
+                spare(&mut out.heading_error_rad, n),
+                spare(&mut out.s_m, n),
+                spare(&mut out.s_rear_m, n),
+                spare(&mut out.lateral_error_rear_m, n),
+                spare(&mut out.lateral_error_front_m, n),
+                spare(&mut out.curvature_per_m, n),
+                spare(&mut out.virtual_obstacle_m, n),
             ],
-            next,
+            next: out.next.as_mut().map(|nx| {
+                [
+                    spare(&mut nx.x_m, n),
+                    spare(&mut nx.y_m, n),
+                    spare(&mut nx.theta_rad, n),
+                    spare(&mut nx.v_mps, n),
+                    spare(&mut nx.delta_rad, n),
+                ]
+            }),
         }
     }
 
     /// The first `mid` entries of every column, and the rest.
     fn split_at(self, mid: usize) -> (Self, Self) {
         let (ok_a, ok_b) = self.ok.split_at_mut(mid);
-        let split = |c: &'a mut [f64]| {
-            if c.is_empty() {
-                (&mut [][..], &mut [][..])
-            } else {
-                c.split_at_mut(mid)
-            }
-        };
+        let split = |c: &'a mut [MaybeUninit<f64>]| c.split_at_mut(mid);
         let [f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10] = self.f.map(split);
-        let [n0, n1, n2, n3, n4] = self.next.map(split);
+        let (next_a, next_b) = match self.next.map(|n| n.map(split)) {
+            Some([n0, n1, n2, n3, n4]) => (
+                Some([n0.0, n1.0, n2.0, n3.0, n4.0]),
+                Some([n0.1, n1.1, n2.1, n3.1, n4.1]),
+            ),
+            None => (None, None),
+        };
         (
             Columns {
                 ok: ok_a,
                 f: [
                     f0.0, f1.0, f2.0, f3.0, f4.0, f5.0, f6.0, f7.0, f8.0, f9.0, f10.0,
                 ],
-                next: [n0.0, n1.0, n2.0, n3.0, n4.0],
+                next: next_a,
             },
             Columns {
                 ok: ok_b,
                 f: [
                     f0.1, f1.1, f2.1, f3.1, f4.1, f5.1, f6.1, f7.1, f8.1, f9.1, f10.1,
                 ],
-                next: [n0.1, n1.1, n2.1, n3.1, n4.1],
+                next: next_b,
             },
         )
     }
 
     /// Entry `j` of every column from a vehicle's step: its outputs `o`
-    /// and, with a time step, its next state (a vehicle whose step failed
-    /// is not written: the columns start as `false` and NaN).
+    /// and, with a time step, its next state.
     #[inline]
     fn write(&mut self, j: usize, o: &ControlOutput, next: Option<&VehicleState>) {
-        self.ok[j] = true;
+        self.ok[j].write(true);
         let vals = [
             o.steering_rad,
             o.accel_mps2,
@@ -634,19 +684,31 @@ impl<'a> Columns<'a> {
             o.virtual_obstacle_m,
         ];
         for (c, v) in self.f.iter_mut().zip(vals) {
-            c[j] = v;
+            c[j].write(v);
         }
-        if let Some(n) = next {
+        if let Some(cols) = &mut self.next {
+            let n = next.expect("a step with a time step integrates every vehicle it steps");
             let vals = [n.x_m, n.y_m, n.theta_rad, n.v_mps, n.delta_rad];
-            for (c, v) in self.next.iter_mut().zip(vals) {
-                c[j] = v;
+            for (c, v) in cols.iter_mut().zip(vals) {
+                c[j].write(v);
             }
+        }
+    }
+
+    /// Entry `j` of every column for a vehicle whose step failed: false and
+    /// NaN.
+    #[cold]
+    fn write_failed(&mut self, j: usize) {
+        self.ok[j].write(false);
+        for c in self.f.iter_mut().chain(self.next.iter_mut().flatten()) {
+            c[j].write(f64::NAN);
         }
     }
 }
 
-/// Steps `entries` (input rows `base..`) into `cols`, split in halves over
-/// rayon's threads down to [`PARALLEL_GRAIN`] vehicles when `parallel`.
+/// Steps `entries` (input rows `base..`) into `cols`, writing every row,
+/// split in halves over rayon's threads down to [`PARALLEL_GRAIN`] vehicles
+/// when `parallel`.
 fn step_range(
     entries: &mut [&mut Entry],
     base: usize,
@@ -656,8 +718,9 @@ fn step_range(
 ) {
     if !parallel || entries.len() <= PARALLEL_GRAIN {
         for (j, e) in entries.iter_mut().enumerate() {
-            if let Some((o, next)) = step_one(e, inp, base + j) {
-                cols.write(j, &o, next.as_ref());
+            match step_one(e, inp, base + j) {
+                Some((o, next)) => cols.write(j, &o, next.as_ref()),
+                None => cols.write_failed(j),
             }
         }
         return;
@@ -1064,13 +1127,22 @@ mod tests {
         let n = 3 * PARALLEL_MIN_VEHICLES / 2;
         let (mut big, big_slots) = fleet_with(n);
         let st = states(n, 1);
-        let [x, y, th, v, d] = cols(&st);
+        let [x, y, mut th, v, d] = cols(&st);
+        // Two unusable rows, in the first part and the last: every thread
+        // writes its failed rows too.
+        th[5] = f64::NAN;
+        th[n - 1] = f64::INFINITY;
         let par = big
             .step(&FleetInputs {
                 dt_s: Some(0.1),
                 ..FleetInputs::new(&big_slots, &x, &y, &th, &v, &d)
             })
             .unwrap();
+        for i in [5, n - 1] {
+            assert!(!par.ok[i] && par.steering_rad[i].is_nan());
+            assert!(par.next.as_ref().unwrap().x_m[i].is_nan());
+        }
+        assert_eq!(par.ok.iter().filter(|&&ok| ok).count(), n - 2);
         let (mut small, small_slots) = fleet_with(n);
         for i in (0..n).step_by(97) {
             let one = small
