@@ -193,8 +193,11 @@ pub struct Fleet {
     tracks: Vec<Option<TrackEntry>>,
     slots: Vec<Option<Entry>>,
     n_active: usize,
-    /// Per-slot "seen in this step" marks, kept to avoid a per-step allocation.
-    seen: Vec<u32>,
+    /// Per slot: [`FREE`] when not in use, else the last step that listed
+    /// it (its `epoch`). A step's check reads this small array, not the
+    /// slots' entries (552 bytes each), and needs no allocation.
+    marks: Vec<u32>,
+    /// The number of the current step (never `FREE`).
     epoch: u32,
     /// Threads a large step is split over (0: rayon's global pool, one per core).
     threads: usize,
@@ -309,14 +312,15 @@ impl Fleet {
             params,
             next_trig: None,
         };
-        let slot = match self.slots.iter().position(Option::is_none) {
+        let slot = match self.marks.iter().position(|&m| m == FREE) {
             Some(i) => {
                 self.slots[i] = Some(entry);
+                self.marks[i] = 0;
                 i
             }
             None => {
                 self.slots.push(Some(entry));
-                self.seen.push(0);
+                self.marks.push(0);
                 self.slots.len() - 1
             }
         };
@@ -328,6 +332,7 @@ impl Fleet {
     pub fn remove_vehicle(&mut self, slot: i64) -> Result<(), FleetError> {
         let i = self.index(slot)?;
         self.slots[i] = None;
+        self.marks[i] = FREE;
         self.n_active -= 1;
         Ok(())
     }
@@ -463,17 +468,25 @@ impl Fleet {
                 });
             }
         }
-        self.epoch = self.epoch.wrapping_add(1);
-        if self.epoch == 0 {
-            self.seen.iter_mut().for_each(|s| *s = 0);
+        self.epoch += 1;
+        if self.epoch == FREE {
+            // The step numbers start over: no slot in use is listed yet.
+            self.marks
+                .iter_mut()
+                .filter(|m| **m != FREE)
+                .for_each(|m| *m = 0);
             self.epoch = 1;
         }
         for &slot in inp.slots {
-            let i = self.index(slot)?;
-            if self.seen[i] == self.epoch {
+            let mark = usize::try_from(slot)
+                .ok()
+                .and_then(|i| self.marks.get_mut(i))
+                .filter(|m| **m != FREE)
+                .ok_or(FleetError::UnknownSlot { slot })?;
+            if *mark == self.epoch {
                 return Err(FleetError::DuplicateSlot { slot });
             }
-            self.seen[i] = self.epoch;
+            *mark = self.epoch;
         }
         Ok(())
     }
@@ -733,6 +746,9 @@ fn step_range(
         || step_range(eb, base + mid, cb, inp, true),
     );
 }
+
+/// The mark of a slot not in use (see `Fleet::marks`).
+const FREE: u32 = u32::MAX;
 
 /// Below this many vehicles a step runs on the calling thread only.
 const PARALLEL_MIN_VEHICLES: usize = 1024;
@@ -1039,6 +1055,35 @@ mod tests {
             .step(&FleetInputs::new(&slots, &x, &y, &th, &v, &d))
             .unwrap();
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn step_numbers_start_over_without_losing_slots() {
+        let (mut f, slots) = fleet_with(3);
+        f.remove_vehicle(slots[1]).unwrap();
+        let live = [slots[0], slots[2]];
+        let st = states(2, 0);
+        let [x, y, th, v, d] = cols(&st);
+        // Two steps before the numbers start over, then the first two.
+        f.epoch = FREE - 2;
+        for _ in 0..3 {
+            f.step(&FleetInputs::new(&live, &x, &y, &th, &v, &d))
+                .unwrap();
+        }
+        assert_eq!(f.epoch, 2);
+        let dup = [slots[2], slots[2]];
+        assert_eq!(
+            f.step(&FleetInputs::new(&dup, &x, &y, &th, &v, &d))
+                .unwrap_err(),
+            FleetError::DuplicateSlot { slot: slots[2] }
+        );
+        let gone = [slots[0], slots[1]];
+        assert_eq!(
+            f.step(&FleetInputs::new(&gone, &x, &y, &th, &v, &d))
+                .unwrap_err(),
+            FleetError::UnknownSlot { slot: slots[1] }
+        );
+        assert_eq!(f.add_vehicle(0, None, None).unwrap(), slots[1] as usize);
     }
 
     #[test]
