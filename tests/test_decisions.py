@@ -926,7 +926,7 @@ def test_junction_blocked_by_a_body_within_the_half_width() -> None:
     origin = {"in_0": "a_0", ":j_0": "b_0"}
     exits: list[str] = []
     network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]), from_lane=lambda lane: origin.get(lane),
-                              junction_exits=lambda via: tuple(exits))
+                              junction_exits=lambda via: tuple(exits), waiting_points_near=lambda via: ())
     j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
     assert j.junction_blocked("me", "in_0") and j.counts["inside_junction_waits"] == 1
     v.cars["o"]["xy"] = (10.0, 7.3 + 1e-3)
@@ -950,6 +950,75 @@ def test_junction_blocked_by_a_body_within_the_half_width() -> None:
     assert not j.junction_blocked("me", "in_0")
 
 
+def test_junction_blocked_while_a_vehicle_heads_for_a_waiting_point_across_the_way() -> None:
+    """Junction lane ":t_0" ends at an internal waiting point whose last 5 m
+    lie 1.6 m from the entering vehicle's path (Bologna's junction 27). The
+    entering vehicle 2 m wide: reach 1 + 0.3, plus a car's half width 0.9:
+    within 2.2 m it waits while any vehicle is on ":t_0", moving there or
+    waiting; at 2.2 m and more, or with ":t_0" empty, it goes."""
+    import numpy as np
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", width=2.0)
+    v.add("turner", width=1.8, length=5.0, angle=90.0, xy=(-30.0, -30.0), speed=4.0)
+    conn.lanes[":t_0"] = ["turner"]
+    near = {"in_0": ((":t_0", 1.6),)}
+    network = SimpleNamespace(junction_lanes=lambda via: (np.array([[0.0, 0.0], [20.0, 0.0]]), [":t_0"]),
+                              from_lane=lambda lane: None, junction_exits=lambda via: (),
+                              waiting_points_near=lambda via: near.get(via, ()))
+    j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
+    # Its body nowhere near the path yet (moving towards the point): waited for all the same.
+    assert j.junction_blocked("me", "in_0") and j.counts == {"inside_junction_waits": 0, "waiting_point_waits": 1}
+    v.cars["turner"]["speed"] = 0.0
+    assert j.junction_blocked("me", "in_0")
+    near["in_0"] = ((":t_0", 2.2 - 1e-9),)
+    assert j.junction_blocked("me", "in_0")
+    near["in_0"] = ((":t_0", 2.2 + 1e-9),)
+    assert not j.junction_blocked("me", "in_0")
+    near["in_0"] = ((":t_0", 1.6),)
+    conn.lanes[":t_0"] = ["me"]
+    assert not j.junction_blocked("me", "in_0"), "the vehicle itself is no blocker"
+    conn.lanes[":t_0"] = []
+    assert not j.junction_blocked("me", "in_0") and j.counts["waiting_point_waits"] == 3
+
+
+def test_the_network_lists_the_waiting_points_near_a_way(tmp_path: Path, build_net: Any) -> None:
+    """A crossroads of two-lane roads: the left turn from the south has an
+    internal waiting point in the middle; the oncoming straight way from the
+    north passes it. Listed with its distance (the straight way's own lanes,
+    the left turn from its own lane and lanes without a waiting point are
+    not); the distance is the polyline distance from the last 5 m of that
+    junction lane to the way."""
+    import numpy as np
+
+    from blendtrack.sumo.geometry import polyline_tail, segments_distance
+    from blendtrack.sumo.network import WAITING_BODY_M, Network
+
+    net = Network(build_net(tmp_path, '<nodes><node id="c" x="0" y="0" type="priority"/><node id="n" x="0" y="100"/>'
+                                      '<node id="s" x="0" y="-100"/><node id="e" x="100" y="0"/><node id="w" x="-100" y="0"/></nodes>',
+                            '<edges><edge id="sc" from="s" to="c" priority="3"/><edge id="cn" from="c" to="n" priority="3"/>'
+                            '<edge id="nc" from="n" to="c" priority="3"/><edge id="cs" from="c" to="s" priority="3"/>'
+                            '<edge id="ec" from="e" to="c" priority="1"/><edge id="cw" from="c" to="w" priority="1"/>'
+                            '<edge id="wc" from="w" to="c" priority="1"/><edge id="ce" from="c" to="e" priority="1"/></edges>'))
+    sumo_net = net.net()
+    straight = [c for c in sumo_net.getEdge("nc").getLane(0).getOutgoing() if c.getTo().getID() == "cs"][0]
+    left = [c for c in sumo_net.getEdge("sc").getLane(0).getOutgoing() if c.getTo().getID() == "cw"][0]
+    first_left = left.getViaLaneID()
+    assert net.connection_of(first_left) is left and sumo_net.getLane(first_left).getOutgoing(), "a waiting point"
+    via = straight.getViaLaneID()
+    listed = dict(net.waiting_points_near(via))
+    path, _ = net.junction_lanes(via)
+    tail = polyline_tail(np.asarray(sumo_net.getLane(first_left).getShape(), dtype=float)[:, :2], WAITING_BODY_M)
+    assert listed[first_left] == pytest.approx(segments_distance(tail, path))
+    assert via not in listed
+    own_left = [c for c in sumo_net.getEdge("nc").getLane(0).getOutgoing() if c.getTo().getID() == "ce"][0]
+    assert own_left.getViaLaneID() not in listed, "a vehicle from the same lane is ahead: followed"
+    for lane in listed:
+        c = net.connection_of(lane)
+        assert c is not None and c.getViaLaneID() == lane and sumo_net.getLane(lane).getOutgoing()[0].getViaLaneID(), lane
+
+
 def test_a_vehicle_ahead_from_the_same_lane_is_followed_not_waited_for() -> None:
     """A vehicle inside the junction in the path that entered from the same
     lane (a left turner ahead of a straight-on vehicle) blocks only while
@@ -966,7 +1035,7 @@ def test_a_vehicle_ahead_from_the_same_lane_is_followed_not_waited_for() -> None
     path = np.array([[0.0, 0.0], [20.0, 0.0]])
     origin = {"in_0": "a_0", ":j_0": "a_0"}
     network = SimpleNamespace(junction_lanes=lambda via: (path, [":j_0"]), from_lane=lambda lane: origin.get(lane),
-                              junction_exits=lambda via: ())
+                              junction_exits=lambda via: (), waiting_points_near=lambda via: ())
     j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
     assert not j.junction_blocked("me", "in_0")
     for speed, pos in [(FOLLOW_MIN_SPEED_MPS - 1e-3, 5.0), (3.0, 5.0 - 1e-3)]:

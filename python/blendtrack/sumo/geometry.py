@@ -573,6 +573,19 @@ def path_ahead(path: np.ndarray, point: np.ndarray) -> np.ndarray:
     return np.vstack([q[k], path[k + 1 :]])
 
 
+def polyline_tail(points: np.ndarray, length: float) -> np.ndarray:
+    """The last ``length`` metres of the polyline ``points`` (n x 2, n >= 2),
+    starting at the point that far from its end (the whole polyline when it
+    is shorter)."""
+    s = polyline_arc_lengths(points)
+    start = s[-1] - length
+    if start <= 0.0:
+        return points
+    k = int(np.searchsorted(s, start, side="right"))
+    u = (start - s[k - 1]) / (s[k] - s[k - 1])
+    return np.vstack([points[k - 1] + u * (points[k] - points[k - 1]), points[k:]])
+
+
 def segments_distance(p: np.ndarray, q: np.ndarray) -> float:
     """Smallest distance between the polylines ``p`` and ``q`` (n x 2 each):
     zero where two segments cross, else the smallest of the end point to

@@ -70,6 +70,10 @@ MERGE_DEFER_M = 3.0
 #: body comes within this much of the half width of the entering vehicle's
 #: path through the junction (m).
 INSIDE_MARGIN_M = 0.3
+
+#: The half width (m) of the car taken to stand at an internal waiting point
+#: (``Junctions.junction_blocked``).
+WAITING_HALF_WIDTH_M = 0.9
 #: Impatience (SUMO's junction model, ``MSLink::blockedByFoe``): a vehicle
 #: that has waited takes an approaching foe that could still stop for it as
 #: arriving its impatience (SUMO's ``vehicle.getImpatience``: the vType's
@@ -120,7 +124,7 @@ class Junctions:
         #: Can a light have been switched since SUMO's step (a step hook,
         #: another TraCI client)? Then ``refresh_tls`` reads each anew.
         self.lights_anew = True
-        self.counts = {"inside_junction_waits": 0}
+        self.counts = {"inside_junction_waits": 0, "waiting_point_waits": 0}
         #: The controlled vehicles told to wait at their line last step, and
         #: this step's so far (``new_step`` moves them over).
         self.waiting: set[str] = set()
@@ -630,7 +634,16 @@ class Junctions:
         lane can diverge from it barely apart; ``getLeader`` reports neither
         (they are on other junction lanes), SUMO's drivers see them through
         the junction's foe lanes, so blendtrack checks the geometry itself.
-        Asked only near a junction whose lanes come near this one."""
+        Asked only near a junction whose lanes come near this one.
+
+        Nor does it enter while a vehicle is on its way to, or waits at, an
+        internal waiting point where a car would stand within that reach of
+        the path (``Network.waiting_points_near``): once it waits there, the
+        two wait for each other. A controlled bus that went in stood behind
+        the left turner waiting across its lane, and the turner, a SUMO
+        driver, waited for the bus inside the junction before its crossing:
+        135-414 s each time (Bologna, junction 27); held at its line the bus
+        is no approaching foe to SUMO, the turner goes, then the bus."""
         path, lanes = self.network.junction_lanes(via)
         if not lanes:
             return False
@@ -640,6 +653,11 @@ class Junctions:
             body, half = body_segment(veh, other)
             if segments_distance(body, path) < reach + half:
                 self.counts["inside_junction_waits"] += 1
+                return True
+        vehicles_on = self.conn.vehicles_on
+        for lane, dist in self.network.waiting_points_near(via):
+            if dist < reach + WAITING_HALF_WIDTH_M and any(other != vid for other in vehicles_on(lane)):
+                self.counts["waiting_point_waits"] += 1
                 return True
         return False
 

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from blendtrack.sumo.geometry import _via_chain, segments_distance
+from blendtrack.sumo.geometry import _via_chain, polyline_tail, segments_distance
 
 #: Junction lanes further than this from a path (m) never carry a vehicle in
 #: its way: a wide body's half width (1.25 m) plus a car's reach (0.9 m +
@@ -17,6 +17,10 @@ from blendtrack.sumo.geometry import _via_chain, segments_distance
 #: apart) are not checked, so a junction that only joins lane after lane (a
 #: highway's edges) asks nothing.
 INSIDE_LANE_REACH_M = 3.0
+
+#: The part of a junction lane before an internal waiting point that a car
+#: standing there covers (m): its length.
+WAITING_BODY_M = 5.0
 
 
 class Network:
@@ -35,6 +39,9 @@ class Network:
         #: Per junction entry lane: the lanes out of the junction after those
         #: near lanes (its own way's excepted); see ``junction_exits``.
         self._exits: dict[str, tuple[str, ...]] = {}
+        #: Per junction entry lane: the junction lanes that end at an
+        #: internal waiting point near its path; see ``waiting_points_near``.
+        self._waiting_near: dict[str, tuple[tuple[str, float], ...]] = {}
         #: Per junction entry lane: its internal waiting point and the distance to it.
         self._waiting_points: dict[str, tuple[str | None, float]] = {}
         self._foes: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
@@ -192,6 +199,33 @@ class Network:
         near lane, though SUMO lists it on the lane its front is on."""
         self.junction_lanes(via)
         return self._exits.get(via, ())
+
+    def waiting_points_near(self, via: str) -> tuple[tuple[str, float], ...]:
+        """The junction lanes near ``via``'s path (``junction_lanes``) that
+        end at an internal waiting point, each with the distance from the
+        path to the lane's last ``WAITING_BODY_M`` (where a car waiting
+        there stands); not those from ``via``'s own lane (a vehicle there is
+        ahead of the one on ``via``: followed, not waited for). Some networks put a left turn's waiting point within
+        reach of another way: a car waiting there stands across it (Bologna,
+        junction 27: 1.6 m from the bus lane's centreline, and SUMO's own bus
+        drives into it in every seed)."""
+        hit = self._waiting_near.get(via)
+        if hit is None:
+            path, near = self.junction_lanes(via)
+            found = []
+            net = self.net()
+            origin = self.from_lane(via)
+            for lane in near:
+                c = self.connection_of(lane)
+                chain = [part.getID() for part in _via_chain(net, c)] if c is not None else []
+                if lane not in chain or chain[-1] == lane or self.from_lane(lane) == origin:
+                    continue
+                tail = polyline_tail(np.asarray(net.getLane(lane).getShape(), dtype=float)[:, :2], WAITING_BODY_M)
+                dist = segments_distance(tail, path)
+                if dist < INSIDE_LANE_REACH_M:
+                    found.append((lane, float(dist)))
+            hit = self._waiting_near[via] = tuple(found)
+        return hit
 
     def waiting_point_after(self, via: str) -> tuple[str | None, float]:
         """The internal waiting point on the junction path that starts with
