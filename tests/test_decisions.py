@@ -1615,3 +1615,32 @@ def test_inside_a_fanout_a_body_standing_across_the_rest_of_the_way_is_the_leade
     # A way that does not start at a fan-out is not looked at.
     v.cars["other"]["pos"] = 0.5
     assert j.leader_in_fanout("me", ":g_0_0", ["in_0", ":g_0_0", "out_0"], ("x", 9.0)) == ("x", 9.0)
+
+
+def test_a_long_vehicle_moved_by_xy_is_kept_on_its_lane_when_its_front_swings_out() -> None:
+    """``SumoRun._keep_route``: the lane "e_0" runs along y = 0 and is 3.2 m
+    wide. A 12 m bus whose front is 1.6 m or more off the centreline is kept
+    on the lane (keepRoute 1); nearer, or a car, or a junction lane, or a
+    change under way: SUMO's nearest lane (3). The length is read once."""
+    import numpy as np
+
+    from blendtrack.sumo.runner import LONG_VEHICLE_M, SumoRun
+
+    conn = FakeConn()
+    conn.vehicle.add("bus", length=12.0)
+    conn.vehicle.add("car", length=5.0)
+    reads: list[str] = []
+    get_length = conn.vehicle.getLength
+    conn.vehicle.getLength = lambda vid: reads.append(vid) or get_length(vid)  # type: ignore[method-assign]
+    shape = (np.array([[0.0, 0.0], [100.0, 0.0]]), 3.2)
+    run = SimpleNamespace(_lengths={}, conn=conn, network=SimpleNamespace(lane_shape=lambda lane: shape))
+    bus, car = SimpleNamespace(vid="bus", changing=None), SimpleNamespace(vid="car", changing=None)
+    keep = SumoRun._keep_route
+    assert keep(run, bus, "e_0", 50.0, 1.6) == 1  # type: ignore[arg-type]
+    assert keep(run, bus, "e_0", 50.0, -2.4) == 1  # type: ignore[arg-type]
+    assert keep(run, bus, "e_0", 50.0, 1.6 - 1e-9) == 3  # type: ignore[arg-type]
+    assert keep(run, bus, ":j_0_0", 50.0, 2.4) == 3  # type: ignore[arg-type]
+    assert keep(run, car, "e_0", 50.0, 2.4) == 3 and LONG_VEHICLE_M > 5.0  # type: ignore[arg-type]
+    bus.changing = (1, 1)
+    assert keep(run, bus, "e_0", 50.0, 2.4) == 3  # type: ignore[arg-type]
+    assert reads == ["bus", "car"]

@@ -58,6 +58,7 @@ class Network:
         self._fanouts: dict[str, tuple[tuple[str, ...], float]] | None = None
         self._into: dict[str, list[tuple[tuple[str, float], ...]]] | None = None
         self._lengths: dict[str, float] = {}
+        self._shapes: dict[str, tuple[np.ndarray, float]] = {}
         self._into_merges: frozenset[str] | None = None
 
     def net(self) -> Any:
@@ -149,6 +150,14 @@ class Network:
         hit = self._lengths.get(lane)
         if hit is None:
             hit = self._lengths[lane] = float(self.net().getLane(lane).getLength())
+        return hit
+
+    def lane_shape(self, lane: str) -> tuple[np.ndarray, float]:
+        """The centreline of ``lane`` (n x 2) and its width (m)."""
+        hit = self._shapes.get(lane)
+        if hit is None:
+            ln = self.net().getLane(lane)
+            hit = self._shapes[lane] = (np.asarray(ln.getShape(), dtype=float)[:, :2], float(ln.getWidth()))
         return hit
 
     def is_zipper(self, via: str) -> bool:
