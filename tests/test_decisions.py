@@ -1621,20 +1621,19 @@ def test_a_long_vehicle_moved_by_xy_is_kept_on_its_lane_when_its_front_swings_ou
     """``SumoRun._keep_route``: the lane "e_0" runs along y = 0 and is 3.2 m
     wide. A 12 m bus whose front is 1.6 m or more off the centreline is kept
     on the lane (keepRoute 1); nearer, or a car, or a junction lane, or a
-    change under way: SUMO's nearest lane (3). The length is read once."""
+    change under way: SUMO's nearest lane (3). The length is its vType's
+    (the selection's type info, as the fleet's body)."""
     import numpy as np
 
     from blendtrack.sumo.runner import LONG_VEHICLE_M, SumoRun
 
-    conn = FakeConn()
-    conn.vehicle.add("bus", length=12.0)
-    conn.vehicle.add("car", length=5.0)
-    reads: list[str] = []
-    get_length = conn.vehicle.getLength
-    conn.vehicle.getLength = lambda vid: reads.append(vid) or get_length(vid)  # type: ignore[method-assign]
+    lengths = {"coach": 12.0, "sedan": 5.0}
+    asked: list[str] = []
+    selection = SimpleNamespace(type_info=lambda vtype: asked.append(vtype) or {"length": lengths[vtype]})
     shape = (np.array([[0.0, 0.0], [100.0, 0.0]]), 3.2)
-    run = SimpleNamespace(_lengths={}, conn=conn, network=SimpleNamespace(lane_shape=lambda lane: shape))
-    bus, car = SimpleNamespace(vid="bus", changing=None), SimpleNamespace(vid="car", changing=None)
+    run = SimpleNamespace(selection=selection, network=SimpleNamespace(lane_shape=lambda lane: shape))
+    bus = SimpleNamespace(vid="bus", changing=None, record=SimpleNamespace(vtype="coach"))
+    car = SimpleNamespace(vid="car", changing=None, record=SimpleNamespace(vtype="sedan"))
     keep = SumoRun._keep_route
     assert keep(run, bus, "e_0", 50.0, 1.6) == 1  # type: ignore[arg-type]
     assert keep(run, bus, "e_0", 50.0, -2.4) == 1  # type: ignore[arg-type]
@@ -1643,4 +1642,4 @@ def test_a_long_vehicle_moved_by_xy_is_kept_on_its_lane_when_its_front_swings_ou
     assert keep(run, car, "e_0", 50.0, 2.4) == 3 and LONG_VEHICLE_M > 5.0  # type: ignore[arg-type]
     bus.changing = (1, 1)
     assert keep(run, bus, "e_0", 50.0, 2.4) == 3  # type: ignore[arg-type]
-    assert reads == ["bus", "car"]
+    assert asked == ["coach"] * 3 + ["sedan"]

@@ -70,7 +70,6 @@ MERGE_DEFER_M = 3.0
 #: body comes within this much of the half width of the entering vehicle's
 #: path through the junction (m).
 INSIDE_MARGIN_M = 0.3
-
 #: The half width (m) of the car taken to stand at an internal waiting point
 #: (``Junctions.junction_blocked``).
 WAITING_HALF_WIDTH_M = 0.9

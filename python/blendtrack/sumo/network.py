@@ -214,10 +214,11 @@ class Network:
         end at an internal waiting point, each with the distance from the
         path to the lane's last ``WAITING_BODY_M`` (where a car waiting
         there stands); not those from ``via``'s own lane (a vehicle there is
-        ahead of the one on ``via``: followed, not waited for). Some networks put a left turn's waiting point within
-        reach of another way: a car waiting there stands across it (Bologna,
-        junction 27: 1.6 m from the bus lane's centreline, and SUMO's own bus
-        drives into it in every seed)."""
+        ahead of the one on ``via``: followed, not waited for). Some networks
+        put a left turn's waiting point within reach of another way: a car
+        waiting there stands across it (Bologna, junction 27: 1.6 m from the
+        bus lane's centreline, and SUMO's own bus drives into it in every
+        seed)."""
         hit = self._waiting_near.get(via)
         if hit is None:
             path, near = self.junction_lanes(via)
@@ -229,7 +230,7 @@ class Network:
                 chain = [part.getID() for part in _via_chain(net, c)] if c is not None else []
                 if lane not in chain or chain[-1] == lane or self.from_lane(lane) == origin:
                     continue
-                tail = polyline_tail(np.asarray(net.getLane(lane).getShape(), dtype=float)[:, :2], WAITING_BODY_M)
+                tail = polyline_tail(self.lane_shape(lane)[0], WAITING_BODY_M)
                 dist = segments_distance(tail, path)
                 if dist < INSIDE_LANE_REACH_M:
                     found.append((lane, float(dist)))

@@ -161,8 +161,6 @@ class SumoRun:
         #: Vehicles whose route index was repaired, by the lane they were on
         #: then: moved by lane position, not (x, y), while on it.
         self._by_lane: dict[str, int] = {}
-        #: Controlled vehicles' lengths (m), read once (``_keep_route``).
-        self._lengths: dict[str, float] = {}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         #: Moves by kind (see RouteFleet): speed only, nothing to send,
         #: (lane, position), (x, y, angle).
@@ -183,7 +181,6 @@ class SumoRun:
         self.stops.drop(vid)
         self.placement.forget(vid)
         self.junctions.forget(vid)
-        self._lengths.pop(vid, None)
 
     def _rebuild(self, act: Active) -> None:
         """The route changed (rerouting): a new track from where the vehicle is."""
@@ -525,7 +522,8 @@ class SumoRun:
         xy_cols = (out[k][idx].tolist() for k in ("edge", "lane_index", "x_front_m", "y_front_m", "angle_deg"))
         for i, edge, lane_index, x_front, y_front, angle, sp in zip(idx.tolist(), *xy_cols, speeds[idx].tolist()):
             try:
-                move_xy(ids[i], edge_names[edge], lane_index, x_front, y_front, angle, self._keep_route(acts[i], lane_names[lanes[i]], x_front, y_front))
+                keep = self._keep_route(acts[i], lane_names[lanes[i]], x_front, y_front)
+                move_xy(ids[i], edge_names[edge], lane_index, x_front, y_front, angle, keep)
                 # Without it SUMO keeps reporting the last setSpeed value,
                 # and followers plan with a wrong leader speed.
                 set_speed(ids[i], sp)
@@ -552,15 +550,13 @@ class SumoRun:
         its front swung 2.4 m towards lane 1 (the rear axle tracks the
         lane), stood on lane 1 to SUMO, and SUMO's drivers merging onto lane
         0 from the junction lane beside drove into it (3 of 13 collisions
-        with a controlled vehicle over seeds 0-11, 30 %; none with this). For every
-        vehicle length the same rule cost arrivals (0.781 -> 0.769 of plain
-        SUMO's): cars' fronts that far off are over the other lane."""
+        with a controlled vehicle over seeds 0-11, 30 %; none with this).
+        For every vehicle length the same rule cost arrivals (0.781 -> 0.769
+        of plain SUMO's): cars' fronts that far off are over the other lane."""
         if act.changing is not None or lane.startswith(":"):
             return 3
-        length = self._lengths.get(act.vid)
-        if length is None:
-            length = self._lengths[act.vid] = float(self.conn.sumo.vehicle.getLength(act.vid))
-        if length < LONG_VEHICLE_M:
+        # The vType's length, as its body in the fleet (read at takeover).
+        if self.selection.type_info(act.record.vtype)["length"] < LONG_VEHICLE_M:
             return 3
         shape, width = self.network.lane_shape(lane)
         front = np.array([[x_front, y_front]])
