@@ -585,6 +585,45 @@ impl FleetOutputs {
         }
     }
 
+    /// Every column: `ok`, the 11 float outputs, and the 5 next-state
+    /// columns with a time step. The one list both [`Columns::of`] (what a
+    /// step writes) and [`FleetOutputs::set_written`] (what it then
+    /// declares written) take, so the two cannot disagree.
+    #[allow(clippy::type_complexity)]
+    fn columns_mut(
+        &mut self,
+    ) -> (
+        &mut Vec<bool>,
+        [&mut Vec<f64>; 11],
+        Option<[&mut Vec<f64>; 5]>,
+    ) {
+        (
+            &mut self.ok,
+            [
+                &mut self.steering_rad,
+                &mut self.accel_mps2,
+                &mut self.alpha,
+                &mut self.lateral_error_m,
+                &mut self.heading_error_rad,
+                &mut self.s_m,
+                &mut self.s_rear_m,
+                &mut self.lateral_error_rear_m,
+                &mut self.lateral_error_front_m,
+                &mut self.curvature_per_m,
+                &mut self.virtual_obstacle_m,
+            ],
+            self.next.as_mut().map(|nx| {
+                [
+                    &mut nx.x_m,
+                    &mut nx.y_m,
+                    &mut nx.theta_rad,
+                    &mut nx.v_mps,
+                    &mut nx.delta_rad,
+                ]
+            }),
+        )
+    }
+
     /// Sets the length of every column to `n`.
     ///
     /// # Safety
@@ -593,32 +632,10 @@ impl FleetOutputs {
     /// [`FleetOutputs::unwritten`]) are written: `Columns::of(self, n)` was
     /// passed whole to [`step_range`] and it returned.
     unsafe fn set_written(&mut self, n: usize) {
-        self.ok.set_len(n);
-        for c in [
-            &mut self.steering_rad,
-            &mut self.accel_mps2,
-            &mut self.alpha,
-            &mut self.lateral_error_m,
-            &mut self.heading_error_rad,
-            &mut self.s_m,
-            &mut self.s_rear_m,
-            &mut self.lateral_error_rear_m,
-            &mut self.lateral_error_front_m,
-            &mut self.curvature_per_m,
-            &mut self.virtual_obstacle_m,
-        ] {
+        let (ok, f, next) = self.columns_mut();
+        ok.set_len(n);
+        for c in f.into_iter().chain(next.into_iter().flatten()) {
             c.set_len(n);
-        }
-        if let Some(next) = &mut self.next {
-            for c in [
-                &mut next.x_m,
-                &mut next.y_m,
-                &mut next.theta_rad,
-                &mut next.v_mps,
-                &mut next.delta_rad,
-            ] {
-                c.set_len(n);
-            }
         }
     }
 }
@@ -638,30 +655,11 @@ impl<'a> Columns<'a> {
         fn spare<T>(c: &mut Vec<T>, n: usize) -> &mut [MaybeUninit<T>] {
             &mut c.spare_capacity_mut()[..n]
         }
+        let (ok, f, next) = out.columns_mut();
         Columns {
-            ok: spare(&mut out.ok, n),
-            f: [
-                spare(&mut out.steering_rad, n),
-                spare(&mut out.accel_mps2, n),
-                spare(&mut out.alpha, n),
-                spare(&mut out.lateral_error_m, n),
-                spare(&mut out.heading_error_rad, n),
-                spare(&mut out.s_m, n),
-                spare(&mut out.s_rear_m, n),
-                spare(&mut out.lateral_error_rear_m, n),
-                spare(&mut out.lateral_error_front_m, n),
-                spare(&mut out.curvature_per_m, n),
-                spare(&mut out.virtual_obstacle_m, n),
-            ],
-            next: out.next.as_mut().map(|nx| {
-                [
-                    spare(&mut nx.x_m, n),
-                    spare(&mut nx.y_m, n),
-                    spare(&mut nx.theta_rad, n),
-                    spare(&mut nx.v_mps, n),
-                    spare(&mut nx.delta_rad, n),
-                ]
-            }),
+            ok: spare(ok, n),
+            f: f.map(|c| spare(c, n)),
+            next: next.map(|cs| cs.map(|c| spare(c, n))),
         }
     }
 
