@@ -487,11 +487,15 @@ def test_wait_for_gap_lines_up_behind_the_tighter_neighbour() -> None:
 
 # ------------------------------------------------------------ junctions
 def junctions(conn: FakeConn, foes: list[tuple[Any, ...]], plan_decel: float = 4.0,
-              crossing: tuple[float, float] | None = None) -> Junctions:
+              crossing: tuple[float, float] | None = None, shapes: dict[str, np.ndarray] | None = None) -> Junctions:
     """Junctions on a fake network: ``foes`` the internal foes of every
-    lane, ``crossing`` where every two ways cross (None: they do not)."""
+    lane, ``crossing`` where every two ways cross (None: they do not),
+    ``shapes`` the centrelines of junction lanes (the others far away)."""
+    shapes = {} if shapes is None else shapes
     network = SimpleNamespace(internal_foes=lambda via: foes, internal_vias={":j_w"}, waiting_point_after=lambda via: (None, 0.0),
-                              junction_lanes=lambda via: (None, []), crossing=lambda via, foe: crossing)
+                              junction_lanes=lambda via: (None, []), crossing=lambda via, foe: crossing,
+                              # Far from every vehicle unless a test moves it.
+                              lane_shape=lambda lane: (shapes.get(lane, np.array([[1e3, 1e3], [1e3 + 1.0, 1e3]])), 3.2))
     return Junctions(conn, network, None, None, plan_decel)  # type: ignore[arg-type]
 
 
@@ -908,6 +912,36 @@ def test_must_yield_holds_a_fast_turner_at_the_entry() -> None:
     conn.vehicle.cars["me"]["speed"] = 12.0
     seen["busy"] = False
     assert not j.must_yield("me", 0)
+
+
+def test_a_foe_standing_at_its_line_with_the_body_across_its_way_is_not_about_to_enter() -> None:
+    """At an internal waiting point, a foe standing 1 m from its line (link
+    open) counts as about to enter, unless the waiting vehicle's body
+    stands across the foe's way: within its half width (1 m) + a car's
+    half width (0.9) + 0.3 m of the foe junction lane's centreline. Then
+    the foe waits for it (SUMO's drivers yield to a vehicle inside the
+    junction in their way), and the two would wait for each other
+    (Bologna, junction 9). The body: front (10, 0) facing east, 5 m long;
+    the foe lane runs north along x = X, 2.2 m off at X = 12.2. A foe
+    that moves, or one farther back on its lane, still counts."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", xy=(10.0, 0.0), angle=90.0, length=5.0, width=2.0)
+    v.add("o", pos=49.0, speed=0.0)
+    conn.lanes["in_0"] = ["o"]
+    shapes: dict[str, np.ndarray] = {}
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "", -1)], shapes=shapes)
+    assert j.internal_junction_busy("me", ":j_w"), "the foe lane far away"
+    shapes[":j_foe"] = np.array([[12.2 + 1e-3, -10.0], [12.2 + 1e-3, 10.0]])
+    assert j.internal_junction_busy("me", ":j_w"), "just out of reach"
+    shapes[":j_foe"] = np.array([[12.2 - 1e-3, -10.0], [12.2 - 1e-3, 10.0]])
+    assert not j.internal_junction_busy("me", ":j_w")
+    v.cars["o"]["speed"] = 0.5
+    assert j.internal_junction_busy("me", ":j_w"), "moving off: about to enter"
+    v.cars["o"]["speed"] = 0.0
+    # Across the body itself (the foe lane through its middle): not about to enter.
+    shapes[":j_foe"] = np.array([[7.5, -10.0], [7.5, 10.0]])
+    assert not j.internal_junction_busy("me", ":j_w")
 
 
 def test_junction_blocked_by_a_body_within_the_half_width() -> None:
