@@ -180,7 +180,7 @@ class Network:
                 chain = [part.getID() for part in _via_chain(net, c)]
                 own = chain[chain.index(via):] if via in chain else chain
                 if own:
-                    path = np.concatenate([np.asarray(net.getLane(x).getShape(), dtype=float)[:, :2] for x in own])
+                    path = np.concatenate([self.lane_shape(x)[0] for x in own])
                     node = c.getFrom().getToNode()
                     seen = set(chain)
                     own_exit = c.getToLane().getID()
@@ -190,8 +190,7 @@ class Network:
                             if lid in seen:
                                 continue
                             seen.add(lid)
-                            pts = np.asarray(part.getShape(), dtype=float)[:, :2]
-                            if segments_distance(pts, path) < INSIDE_LANE_REACH_M:
+                            if segments_distance(self.lane_shape(lid)[0], path) < INSIDE_LANE_REACH_M:
                                 near.append(lid)
                                 out = other.getToLane().getID()
                                 if out != own_exit and out not in exits:
