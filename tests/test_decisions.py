@@ -560,6 +560,28 @@ def test_an_impatient_vehicle_lets_a_foe_come_that_could_stop_and_keeps_its_impa
     assert "me" not in j.went
 
 
+def test_impatience_never_counts_on_a_controlled_foe_to_brake() -> None:
+    """The foe of the impatience test (8 m/s, 31 m from its line, able to
+    stop for the vehicle) is let come by an impatient vehicle when SUMO
+    drives it, never when blendtrack does: a controlled vehicle brakes for
+    one crossing its way only once that one's body is near its path
+    (``junction_blocked``), too late at speed. At Bologna's junction 51 a
+    controlled vehicle from the minor road went, impatient, 3.5 s ahead of
+    a controlled one at 13.7 m/s on the major road, which drove into it
+    (seed 9, 449 s)."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", impatience=1.0)
+    v.add("o", pos=19.0, speed=8.0)
+    conn.lanes["in_0"] = ["o"]
+    j = junctions(conn, [(":j_foe", "in_0", 50.0, "", -1)])
+    assert not j.internal_junction_busy("me", ":j_w", gap=1.0)
+    j.went.clear()
+    j.controlled = {"o": None}
+    assert j.internal_junction_busy("me", ":j_w", gap=1.0)
+    assert j.went == {}
+
+
 def test_internal_junction_busy_with_a_foe_inside_or_near() -> None:
     conn = FakeConn()
     v = conn.vehicle

@@ -925,10 +925,8 @@ class _Patience:
     (``MSLink::blockedByFoe``). A foe that could still stop before the ways
     cross counts as arriving ``impatience x IMPATIENT_DELAY_S`` later than
     it would. "Could stop": its front its minGap short of the point,
-    braking at its decel (a controlled one at the planning deceleration)
-    from when it sees the vehicle inside the junction (SUMO's drivers
-    through the junction's foe lanes, controlled ones through
-    ``junction_blocked``), at its speed until then: the time the vehicle
+    braking at its decel from when it sees the vehicle inside the junction
+    (through the junction's foe lanes), at its speed until then: the time the vehicle
     needs to get its front over the line from where it is at its crossing
     acceleration, in whole steps (SUMO's driver plans each step with where
     the vehicle was at the end of the step before, and a speed-only move
@@ -968,17 +966,19 @@ class _Patience:
         where their ways cross (or of its line) at ``speed``, would arrive
         there in ``arrive`` seconds, within the ``needed_s`` it waits for?
         Only if the foe could still stop, and once delayed by the impatience
-        arrives ``needed_s`` or later."""
+        arrives ``needed_s`` or later. Never for a controlled foe: it brakes
+        for a vehicle crossing its way only once that one's body is near its
+        path (``junction_blocked``), too late at speed (Bologna, junction
+        51: a controlled vehicle at 13.7 m/s drove into an impatient one)."""
         imp = self.impatience()
-        if imp <= 0.0:
+        if imp <= 0.0 or foe in self.j.controlled:
             return False
         if arrive + imp * IMPATIENT_DELAY_S < needed_s:
             return False
         j = self.j
         veh = j.conn.sumo.vehicle
-        decel = j.plan_decel if foe in j.controlled else float(veh.getDecel(foe))
         room = dist - float(veh.getMinGap(foe)) - speed * self.t_seen
-        if room < speed * speed / (2.0 * max(decel, 0.1)):
+        if room < speed * speed / (2.0 * max(float(veh.getDecel(foe)), 0.1)):
             return False
         self.j.went[self.vid] = (self.via, imp)
         return True
