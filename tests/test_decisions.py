@@ -125,6 +125,9 @@ class FakeConn:
     def get_lane_pos(self, vid: str) -> float:
         return self.vehicle.getLanePosition(vid)
 
+    def get_lane_id(self, vid: str) -> str:
+        return self.vehicle.getLaneID(vid)
+
 
 class FakeLane:
     def __init__(self, length: float, width: float = 3.2, n_lanes: int = 3) -> None:
@@ -855,7 +858,7 @@ def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tup
     tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda k: via), lights=SimpleNamespace(name=lambda k: f"tl{k}"))
     # No link state known (""): the decision rests on SUMO's getNextLinks; no zipper.
     network = SimpleNamespace(internal_vias={":j_w"}, waiting_point_after=lambda v: waiting,
-                              is_zipper=lambda v: False, link_state=lambda v: "")
+                              is_zipper=lambda v: False, link_state=lambda v: "", lanes_after=lambda v: [])
     j = Junctions(conn, network, tracks, fleet, 4.0)  # type: ignore[arg-type]
 
     def busy(vid: str, lane: str, horizon_s: float = jn.INTERNAL_YIELD_S, gap: float | None = None) -> bool:
@@ -910,6 +913,63 @@ def test_must_yield_asks_sumo_only_where_the_link_lacks_priority_now() -> None:
         get_links = conn.vehicle.getNextLinks
         conn.vehicle.getNextLinks = lambda vid: calls.append(vid) or get_links(vid)  # type: ignore[method-assign]
         assert j.must_yield("me", 0) is asked and bool(calls) is asked, state
+
+
+def keep_clear_setup(out_len: float = 50.0, keep_clear: bool = True, roundabout: frozenset[str] = frozenset()
+                     ) -> tuple[FakeConn, Junctions]:
+    """``me`` on lane in_0 at 80 m, 6 m/s, its line at 100 m; its way
+    :j_0_0 (10 m) leads onto out_0 (``out_len``). Every body 5 m with a
+    2.5 m minGap: it needs 7.5 m on out_0."""
+    conn = FakeConn()
+    conn.vehicle.add("me", speed=6.0, pos=80.0, lane="in_0")
+    conn.lanes = {"in_0": ["me"], ":j_0_0": [], "out_0": []}
+    after = {":j_0_0": [(":j_0_0", 10.0), ("out_0", out_len)]}
+    network = SimpleNamespace(lanes_after=lambda v: after.get(v, []), keeps_clear=lambda v: keep_clear,
+                              in_roundabout=lambda edge: edge in roundabout)
+    return conn, Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
+
+
+def test_keep_clear_room_behind_the_last_standing_vehicle_in_closed_form() -> None:
+    """SUMO's keep-clear rule: the room on the lane out is the back of its
+    rearmost standing vehicle less the gross lengths (length + minGap) of
+    the moving ones behind it, of the ones inside the junction on the same
+    way and of the ones ahead on the vehicle's own lane."""
+    conn, j = keep_clear_setup()
+    blocked = lambda: j.exit_blocked("me", 0, ":j_0_0", 20.0)  # noqa: E731
+    assert not blocked(), "an empty lane out"
+    conn.vehicle.add("s", speed=0.0, pos=12.5, lane="out_0")  # back at 7.5 m
+    conn.lanes["out_0"] = ["s"]
+    assert not blocked(), "exactly 7.5 m of room"
+    conn.vehicle.cars["s"]["pos"] = 12.5 - 1e-6
+    assert blocked()
+    conn.vehicle.cars["s"]["pos"] = 30.0  # back at 25 m
+    conn.vehicle.add("m", speed=3.0, pos=20.0, lane="out_0")
+    conn.lanes["out_0"] = ["m", "s"]  # back to front
+    assert not blocked(), "25 - 7.5 = 17.5 m"
+    conn.vehicle.add("i", speed=3.0, pos=5.0, lane=":j_0_0")
+    conn.lanes[":j_0_0"] = ["i"]
+    conn.vehicle.add("f", speed=0.0, pos=95.0, lane="in_0")
+    conn.lanes["in_0"] = ["me", "f"]
+    assert blocked(), "25 - 3 * 7.5 = 2.5 m"
+    conn.vehicle.cars["s"]["pos"] = 35.0
+    assert not blocked(), "30 - 3 * 7.5 = 7.5 m"
+    conn.vehicle.cars["s"]["pos"] = 35.0 - 1e-6
+    assert blocked()
+    conn.vehicle.cars["s"]["speed"] = 0.2
+    assert not blocked(), "nobody standing on the lane out: SUMO's drivers go"
+    assert j.counts["keep_clear_waits"] == 3
+
+
+def test_keep_clear_exemptions() -> None:
+    """Not judged: a link with keepClear 0, a short lane out, a lane out
+    in a roundabout, and a vehicle that cannot stop gently before its line."""
+    for kw in ({"keep_clear": False}, {"out_len": 19.0}, {"roundabout": frozenset({"out"})}, {}):
+        conn, j = keep_clear_setup(**kw)  # type: ignore[arg-type]
+        conn.vehicle.add("s", speed=0.0, pos=6.0, lane="out_0")
+        conn.lanes["out_0"] = ["s"]
+        # 6 m/s stops within 36 / 8 = 4.5 m at 4 m/s^2.
+        assert j.exit_blocked("me", 0, ":j_0_0", 4.5) is (not kw), kw
+        assert not j.exit_blocked("me", 0, ":j_0_0", 4.5 - 1e-3), kw
 
 
 def test_must_yield_at_an_internal_waiting_point_asks_the_foes() -> None:
@@ -1025,7 +1085,7 @@ def test_junction_blocked_while_a_vehicle_heads_for_a_waiting_point_across_the_w
                               waiting_points_near=lambda via: near.get(via, ()))
     j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
     # Its body nowhere near the path yet (moving towards the point): waited for all the same.
-    assert j.junction_blocked("me", "in_0") and j.counts == {"inside_junction_waits": 0, "waiting_point_waits": 1}
+    assert j.junction_blocked("me", "in_0") and j.counts == {"inside_junction_waits": 0, "waiting_point_waits": 1, "keep_clear_waits": 0}
     v.cars["turner"]["speed"] = 0.0
     assert j.junction_blocked("me", "in_0")
     near["in_0"] = ((":t_0", 2.2 - 1e-9),)

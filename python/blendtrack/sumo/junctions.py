@@ -102,6 +102,14 @@ def lacks_priority(link: Any) -> bool:
     return (not link[1]) and bool(link[3])
 
 
+#: Lanes out shorter than this are not judged by the keep-clear rule: a
+#: short lane between two close junctions holds a queue as long as a car.
+EXIT_MIN_LANE_M = 20.0
+#: A vehicle slower than this on the lane out counts as standing in the
+#: keep-clear rule (SUMO's SUMO_const_haltingSpeed).
+HALT_SPEED_EXIT_MPS = 0.1
+
+
 class Junctions:
     """Yield answers for ``RouteFleet.plan_sumo``'s questions, and the lights' states."""
 
@@ -123,7 +131,7 @@ class Junctions:
         #: Can a light have been switched since SUMO's step (a step hook,
         #: another TraCI client)? Then ``refresh_tls`` reads each anew.
         self.lights_anew = True
-        self.counts = {"inside_junction_waits": 0, "waiting_point_waits": 0}
+        self.counts = {"inside_junction_waits": 0, "waiting_point_waits": 0, "keep_clear_waits": 0}
         #: The controlled vehicles told to wait at their line last step, and
         #: this step's so far (``new_step`` moves them over).
         self.waiting: set[str] = set()
@@ -274,6 +282,8 @@ class Junctions:
                     if lacks_priority(link):
                         return True
                     break
+            if self.exit_blocked(vid, slot, via, stop[0] - self.fleet.s_front(slot)):
+                return True
             inner, offset = self.network.waiting_point_after(via)
             if inner is not None:
                 # A turn with an internal waiting point a few metres into the
@@ -296,6 +306,67 @@ class Junctions:
                 if v * v > 2.0 * gentle * room and self.internal_junction_busy(vid, inner, horizon):
                     return True
         return self.junction_blocked(vid, via)
+
+    def exit_blocked(self, vid: str, slot: int, via: str, gap: float) -> bool:
+        """Is there no room for ``vid`` on the lane out of its way ``via``
+        behind a standing vehicle (SUMO's drivers' keep-the-junction-clear
+        rule, ``MSVehicle::checkRewindLinkLanes``)? The room is the back of
+        the rearmost vehicle standing (below ``HALT_SPEED_EXIT_MPS``) on the
+        lane out, less the length plus minGap of every vehicle between:
+        moving ones behind it on that lane, the ones on the way's junction
+        lanes and the ones ahead of ``vid`` on its own lane; blocked when
+        that is less than ``vid``'s own length plus minGap. Not judged: a
+        connection with ``keepClear="0"`` and a vehicle or a lane out in a
+        roundabout (as SUMO does not), a lane out under ``EXIT_MIN_LANE_M``,
+        a vehicle on a junction lane, and one that cannot stop before its
+        line at the planning deceleration (``gap``: its front to the line).
+        Without it, on the shipped grid with every vehicle controlled,
+        vehicles went in behind a queue, stood inside the junction across
+        the crossing ways, and 4 of the ones they blocked waited there
+        until SUMO teleported them."""
+        network = self.network
+        after = network.lanes_after(via)
+        if len(after) < 2 or not network.keeps_clear(via):
+            return False
+        out, out_len = after[-1]
+        if out_len < EXIT_MIN_LANE_M:
+            return False
+        conn = self.conn
+        veh = conn.sumo.vehicle
+        lane = conn.get_lane_id(vid)
+        if lane.startswith(":") or network.in_roundabout(lane.rsplit("_", 1)[0]):
+            return False
+        v = max(float(conn.get_speed(vid)), 0.0)
+        if v * v > 2.0 * self.plan_decel * max(gap, 0.0):
+            return False
+        get_pos, get_speed = conn.get_lane_pos, conn.get_speed
+        brutto = self._brutto
+        space, lengths = None, 0.0
+        for other in conn.vehicles_on(out):
+            if other != vid and float(get_speed(other)) < HALT_SPEED_EXIT_MPS:
+                if network.in_roundabout(out.rsplit("_", 1)[0]):
+                    return False
+                space = float(get_pos(other)) - float(veh.getLength(other)) - lengths
+                break
+            lengths += brutto(other)
+        if space is None:
+            return False
+        for inside, _ in after[:-1]:
+            for other in conn.vehicles_on(inside):
+                if other != vid:
+                    space -= brutto(other)
+        own = float(get_pos(vid))
+        for other in conn.vehicles_on(lane):
+            if other != vid and float(get_pos(other)) > own:
+                space -= brutto(other)
+        if space >= brutto(vid):
+            return False
+        self.counts["keep_clear_waits"] += 1
+        return True
+
+    def _brutto(self, vid: str) -> float:
+        veh = self.conn.sumo.vehicle
+        return float(veh.getLength(vid)) + float(veh.getMinGap(vid))
 
     def _has_priority_now(self, stop: Any, state: str) -> bool:
         """Has the link of ``stop`` (``RouteFleet.next_stop``'s) priority

@@ -60,6 +60,8 @@ class Network:
         self._lengths: dict[str, float] = {}
         self._shapes: dict[str, tuple[np.ndarray, float]] = {}
         self._into_merges: frozenset[str] | None = None
+        self._not_keep_clear: frozenset[str] | None = None
+        self._roundabout_edges: frozenset[str] | None = None
 
     def net(self) -> Any:
         """The sumolib network."""
@@ -360,6 +362,23 @@ class Network:
                     hit.append((to.getID(), float(to.getLength())))
             self._after[via] = hit
         return hit
+
+    def keeps_clear(self, via: str) -> bool:
+        """Must the junction be kept clear on the way of ``via`` (the
+        connection's ``keepClear``, true unless the network says 0)?"""
+        if self._not_keep_clear is None:
+            import sumolib
+
+            self._not_keep_clear = frozenset(
+                c.via for c in sumolib.xml.parse_fast(str(self.net_file), "connection", ["keepClear", "via"])
+                if c.keepClear in ("0", "false"))
+        return via not in self._not_keep_clear
+
+    def in_roundabout(self, edge: str) -> bool:
+        """Is ``edge`` part of a roundabout?"""
+        if self._roundabout_edges is None:
+            self._roundabout_edges = frozenset(e for r in self.net().getRoundabouts() for e in r.getEdges())
+        return edge in self._roundabout_edges
 
     def conflict(self, via: str, foe: str) -> tuple[float, float]:
         """Where the way through the junction from ``via`` on first meets the

@@ -252,6 +252,7 @@ class SumoRun:
             "lane_changes_aborted": lanes["lane_changes_aborted"],
             "inside_junction_waits": self.junctions.counts["inside_junction_waits"],
             "waiting_point_waits": self.junctions.counts["waiting_point_waits"],
+            "keep_clear_waits": self.junctions.counts["keep_clear_waits"],
             "courtesy_steps": lanes["courtesy_steps"],
             "gaps_opened": lanes["gaps_opened"],
             "merge_lead_steps": lanes["merge_lead_steps"],
