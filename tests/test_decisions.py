@@ -1343,7 +1343,8 @@ def _fanout_junctions(conn: FakeConn) -> Junctions:
     """Lane "in_1" (20 m) fans out over ":j_0_1" (10 m, into "out_1") and
     ":j_0_2" (10 m, into "out_2")."""
     after = {":j_0_1": [(":j_0_1", 10.0), ("out_1", 100.0)], ":j_0_2": [(":j_0_2", 10.0), ("out_2", 100.0)]}
-    net = SimpleNamespace(fanouts=lambda: {"in_1": ((":j_0_1", ":j_0_2"), 20.0)}, lanes_after=lambda via: after.get(via, []))
+    net = SimpleNamespace(fanouts=lambda: {"in_1": ((":j_0_1", ":j_0_2"), 20.0)}, lanes_after=lambda via: after.get(via, []),
+                          from_lane=lambda via: "in_1", junction_lanes=lambda via: (np.zeros((0, 2)), ()))
     return Junctions(conn, net, None, None, 4.0)  # type: ignore[arg-type]
 
 
@@ -1690,6 +1691,44 @@ def test_a_sumo_driver_waiting_for_the_controlled_vehicle_s_way_at_an_internal_s
     # Not yet at its waiting point (4 m before it): followed as before.
     v.cars["sumo"]["pos"] = 9.0
     assert junctions(yields=True).leader_at_merge("me", ":w_0_0", track, None) == ("sumo", pytest.approx(7.0 - 7.0 - 5.0 - 2.5))
+
+
+def test_before_a_fanout_a_body_standing_across_the_way_on_the_branch_beside_is_the_leader() -> None:
+    """Lane "in_0" (100 m, ending at (0, 0)) fans out through ":f_0_0"
+    (the track's, straight east to (10, 0)) and ":f_0_1". "me" is on
+    "in_0" at 95 m, its front at (-5, 0), with nothing ahead on its own
+    way. "other" stands on ":f_0_1" with its body (width 2) from (1, 1.2)
+    to (6, 1.2), across the track's way (1.2 m from it, within the half
+    widths and the margin, 1 + 0.3 + 1): it is the leader, at the straight
+    distance from the front to its body, less its half width and the
+    minGap: sqrt(6^2 + 1.2^2) - 1 - 2.5 (Bologna, junction 11: a vehicle
+    inserted at speed ran into one such)."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="in_0", pos=95.0, speed=13.9, xy=(-5.0, 0.0), angle=90.0)
+    v.add("other", lane=":f_0_1", pos=6.0, speed=0.0, xy=(6.0, 1.2), angle=90.0)
+    v.cars["me"]["min_gap"] = 2.5
+    conn.lanes = {":f_0_1": ["other"]}
+    after = {":f_0_0": [(":f_0_0", 10.0), ("out_0", 100.0)]}
+    net = SimpleNamespace(
+        from_lane=lambda via: "in_0" if via.startswith(":f_0_") else None,
+        fanouts=lambda: {"in_0": ((":f_0_0", ":f_0_1"), 100.0)},
+        lanes_after=lambda via: after.get(via, []),
+        junction_lanes=lambda via: (np.array([[0.0, 0.0], [10.0, 0.0]]), (":f_0_1",)),
+        junction_exits=lambda via: ("out_1",),
+    )
+    j = Junctions(conn, net, None, None, 4.0, controlled={})  # type: ignore[arg-type]
+    track = ["in_0", ":f_0_0", "out_0"]
+    expected = math.hypot(6.0, 1.2) - 1.0 - 2.5
+    assert j.leader_at_fanout("me", "in_0", track, None) == ("other", pytest.approx(expected))
+    # SUMO's farther leader gives way to it; a nearer one on the lane stays.
+    assert j.leader_at_fanout("me", "in_0", track, ("far", 40.0)) == ("other", pytest.approx(expected))
+    assert j.leader_at_fanout("me", "in_0", track, ("close", 1.0)) == ("close", 1.0)
+    # Clear of the way (the branches have parted there), or moving off: not in the way.
+    v.cars["other"]["xy"] = (6.0, 3.5)
+    assert j.leader_at_fanout("me", "in_0", track, None) is None
+    v.cars["other"].update(xy=(6.0, 1.2), speed=FOLLOW_MIN_SPEED_MPS)
+    assert j.leader_at_fanout("me", "in_0", track, None) is None
 
 
 def test_inside_a_fanout_a_body_standing_across_the_rest_of_the_way_is_the_leader() -> None:
