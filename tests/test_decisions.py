@@ -1655,6 +1655,54 @@ def test_a_change_waits_for_a_driver_joining_the_target_lane_from_beyond() -> No
     assert joining()
 
 
+def test_a_controlled_foe_is_known_by_its_track_wherever_sumo_has_it() -> None:
+    """Bologna's 39a in small: "me" (slot 0) stands 1 m before its line on
+    the minor road; the major way ":m_0_0" crosses its way 4 m into it,
+    after a lane in "maj_0" of 0.2 m. A controlled bus (slot 1) whose
+    track enters through ":m_0_0" 6 m ahead of its front, at 4 m/s, is on
+    no lane SUMO would look at for this link (it has the bus on the lane
+    beside, on its way to ":m_0_1"): the bus arrives at the crossing in
+    (6 + 4 - 2.5) / 4 = 1.9 s, before "me" can cross, so "me" waits.
+    SUMO's drivers are not looked for so far back."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="min_0", pos=99.0, speed=0.0)
+    v.add("bus", lane="before_1", pos=10.0, speed=4.0, length=12.0)
+    conn.lanes = {"maj_0": [], ":m_0_0": [], "before_1": ["bus"]}
+    prohibitors = {":n_0_0": [(":m_0_0", "maj_0", 0.2, "", -1)]}
+    net = SimpleNamespace(prohibitors=lambda via: prohibitors.get(via, []), conflict=lambda via, foe: (5.0, 4.0))
+    fronts = {0: 99.0, 1: 50.0}
+    lines = {1: [(20.0, 1), (56.0, 0)]}  # slot: (stop line's arc length, its junction lane's id)
+
+    def stops_ahead(slots: list[int], max_m: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """As the RouteFleet's (tested in Rust): the lines ahead of each front within max_m."""
+        rows = [(k, via, s - fronts[slot]) for k, slot in enumerate(slots) for s, via in lines.get(slot, [])
+                if 0.0 <= s - fronts[slot] <= max_m]
+        return (np.array([r[0] for r in rows], dtype=np.int64), np.array([r[1] for r in rows], dtype=np.int64),
+                np.array([r[2] for r in rows]))
+
+    fleet = SimpleNamespace(stops_ahead=stops_ahead, s_front=lambda slot: fronts[slot])
+    tracks = SimpleNamespace(lanes=SimpleNamespace(names=[":m_0_0", ":x_0_0"]))
+    controlled = {"me": SimpleNamespace(slot=0), "bus": SimpleNamespace(slot=1)}
+    j = Junctions(conn, net, tracks, fleet, 4.0, controlled=controlled)  # type: ignore[arg-type]
+    assert j.approaching_on_tracks() == {":m_0_0": [("bus", pytest.approx(6.0))]}
+    assert j.link_busy("me", 0, ":n_0_0", 100.0)
+    # Farther back along its track than the look-ahead: not looked for.
+    fronts[1] = 56.0 - jn.APPROACH_LOOK_M - 1.0
+    j.new_step()
+    assert ":m_0_0" not in j.approaching_on_tracks() and not j.link_busy("me", 0, ":n_0_0", 100.0)
+    # Past its line (its front inside the junction): the check of the foe
+    # lane's vehicles is the one that counts.
+    fronts[1] = 57.0
+    j.new_step()
+    assert not j.link_busy("me", 0, ":n_0_0", 100.0)
+    # A SUMO driver where the bus was is not seen (SUMO's own links report it).
+    fronts[1] = 50.0
+    j.controlled = {"me": controlled["me"]}
+    j.new_step()
+    assert not j.link_busy("me", 0, ":n_0_0", 100.0)
+
+
 def test_a_sumo_driver_waiting_for_the_controlled_vehicle_s_way_at_an_internal_stop_is_not_followed() -> None:
     """Junction 50 of Bologna in small: the major way ":w_0_0" (12 m) and the
     minor left turn ":w_1_0" (13 m), then its internal waiting point

@@ -448,6 +448,32 @@ impl RouteFleet {
         }))
     }
 
+    /// Where the tracks of `slots` enter junctions within `max_m` ahead of
+    /// the fronts: three arrays, the index into `slots`, the first junction
+    /// lane's id and the distance from the front to the line.
+    #[allow(clippy::type_complexity)]
+    fn stops_ahead<'py>(
+        &self,
+        py: Python<'py>,
+        slots: I64In<'py>,
+        max_m: f64,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<i64>>,
+        Bound<'py, PyArray1<f64>>,
+    )> {
+        let sl = vec_of(&slots);
+        let found = self.inner.stops_ahead(&sl, max_m).map_err(traffic_error)?;
+        let index: Vec<i64> = found.iter().map(|f| f.0 as i64).collect();
+        let via: Vec<i64> = found.iter().map(|f| i64::from(f.1)).collect();
+        let gap: Vec<f64> = found.iter().map(|f| f.2).collect();
+        Ok((
+            index.into_pyarray(py),
+            via.into_pyarray(py),
+            gap.into_pyarray(py),
+        ))
+    }
+
     fn vehicle_config(&self, slot: i64) -> PyResult<ControllerConfig> {
         self.inner
             .vehicle_config(slot)

@@ -496,6 +496,40 @@ impl RouteFleet {
         let d = self.driven(slot)?;
         Ok(d.route.stops.get(d.next_stop).copied())
     }
+    /// Where the tracks of `slots` enter junctions ahead: for each stop line
+    /// at most `max_m` ahead of a vehicle's front and not behind it, (the
+    /// index into `slots`, the line's [`StopLine::via`], the distance from
+    /// the front to the line), each vehicle's nearest first. A caller asks
+    /// which of its own vehicles approach a link, wherever the simulator
+    /// has them (a foe a link's lane in does not show).
+    pub fn stops_ahead(
+        &self,
+        slots: &[i64],
+        max_m: f64,
+    ) -> Result<Vec<(usize, u32, f64)>, TrafficError> {
+        if max_m.is_nan() {
+            return Err(TrafficError::Parameter {
+                name: "max_m",
+                value: max_m,
+                message: "must not be NaN",
+            });
+        }
+        let mut out = Vec::new();
+        for (k, &slot) in slots.iter().enumerate() {
+            let d = self.driven(slot)?;
+            let stops = &d.route.stops;
+            for stop in &stops[d.next_stop.min(stops.len())..] {
+                let gap = stop.s_m - d.s_front_m;
+                if gap > max_m {
+                    break;
+                }
+                if gap >= 0.0 {
+                    out.push((k, stop.via, gap));
+                }
+            }
+        }
+        Ok(out)
+    }
     pub fn vehicle_config(&self, slot: i64) -> Result<&ControllerConfig, TrafficError> {
         Ok(self.fleet.vehicle_config(slot)?)
     }
@@ -601,6 +635,29 @@ mod tests {
     use crate::testkit::*;
     use crate::*;
     use blendtrack::FleetError;
+
+    #[test]
+    fn stops_ahead_lists_the_lines_within_reach_of_each_front() {
+        // The road's one line is at 200 m; a front at 150 + 3.5 m is
+        // 46.5 m from it, one at 205 + 3.5 m is past it.
+        let (mut f, t) = fleet_on(road(None, false));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(150.0, 0.0), None)
+            .unwrap() as i64;
+        let b = f
+            .add_vehicle(t, None, None, body(), at(205.0, 0.0), None)
+            .unwrap() as i64;
+        let got = f.stops_ahead(&[b, a], 100.0).unwrap();
+        assert_eq!(got.len(), 1);
+        assert_eq!((got[0].0, got[0].1), (1, 11));
+        assert!((got[0].2 - 46.5).abs() < 1e-9, "{}", got[0].2);
+        assert!(f.stops_ahead(&[a], 46.0).unwrap().is_empty());
+        assert!(matches!(
+            f.stops_ahead(&[a], f64::NAN),
+            Err(TrafficError::Parameter { name: "max_m", .. })
+        ));
+        assert!(f.stops_ahead(&[a, 99], 100.0).is_err());
+    }
 
     #[test]
     fn settings_are_the_fleets_own() {
