@@ -871,6 +871,15 @@ class Junctions:
         length = float(veh.getLength(vid))
         a = self.plan_accel
         patience = _Patience(self, vid, via, v, gap)
+
+        def first(other: str, d: float, t_cross: float) -> bool:
+            """Does ``other``, ``d`` from the crossing point (less the
+            clearance) at its speed, get there before ``t_cross``, and is
+            not let come?"""
+            speed = float(get_speed(other))
+            arrive = 0.0 if d < INTERNAL_YIELD_NEAR_M else d / max(speed, 1e-9)
+            return arrive < t_cross and not patience.lets_go(other, d, speed, arrive, t_cross)
+
         for foe, incoming, lane_length, tls, link, ours, theirs in foes:
             dist = gap + ours + CONFLICT_CLEAR_M + length
             t_cross = (math.sqrt(v * v + 2.0 * a * dist) - v) / a + CROSS_MARGIN_S
@@ -884,12 +893,7 @@ class Junctions:
                 if 0 <= link < len(state) and state[link] not in "GgsOoyY":
                     continue  # the foe's light is red: it stops
             for other in vehicles_on(incoming):
-                if other == vid:
-                    continue
-                d = lane_length - float(get_pos(other)) + theirs - CONFLICT_CLEAR_M
-                speed = float(get_speed(other))
-                arrive = 0.0 if d < INTERNAL_YIELD_NEAR_M else d / max(speed, 1e-9)
-                if arrive < t_cross and not patience.lets_go(other, d, speed, arrive, t_cross):
+                if other != vid and first(other, lane_length - float(get_pos(other)) + theirs - CONFLICT_CLEAR_M, t_cross):
                     return True
             # A controlled foe is known by its track, wherever SUMO has it:
             # before the lane in (a lane in of 0.2 m at Bologna's 39a), or
@@ -897,12 +901,7 @@ class Junctions:
             # bend, on lane 1 to SUMO, its way through lane 0's link: a car
             # from the minor road went, and met it).
             for other, to_line in self.approaching_on_tracks().get(foe, ()):
-                if other == vid:
-                    continue
-                d = to_line + theirs - CONFLICT_CLEAR_M
-                speed = float(get_speed(other))
-                arrive = 0.0 if d < INTERNAL_YIELD_NEAR_M else d / max(speed, 1e-9)
-                if arrive < t_cross and not patience.lets_go(other, d, speed, arrive, t_cross):
+                if other != vid and first(other, to_line + theirs - CONFLICT_CLEAR_M, t_cross):
                     return True
         return False
 
