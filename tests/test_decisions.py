@@ -1659,11 +1659,11 @@ def test_a_controlled_foe_is_known_by_its_track_wherever_sumo_has_it() -> None:
     """Bologna's 39a in small: "me" (slot 0) stands 1 m before its line on
     the minor road; the major way ":m_0_0" crosses its way 4 m into it,
     after a lane in "maj_0" of 0.2 m. A controlled bus (slot 1) whose
-    track enters through ":m_0_0" 6 m ahead of its front, at 4 m/s, is on
-    no lane SUMO would look at for this link (it has the bus on the lane
-    beside, on its way to ":m_0_1"): the bus arrives at the crossing in
-    (6 + 4 - 2.5) / 4 = 1.9 s, before "me" can cross, so "me" waits.
-    SUMO's drivers are not looked for so far back."""
+    track enters through ":m_0_0" 6 m ahead of its front, at 4 m/s, is to
+    SUMO on "before_1", the lane beside its track's "before_0", on no lane
+    SUMO would look at for this link: the bus arrives at the crossing in
+    (6 + 4 - 2.5) / 4 = 1.9 s, before "me" can cross, so "me" waits. Where
+    SUMO has it on its track's lane, SUMO's word (its links) stands."""
     conn = FakeConn()
     v = conn.vehicle
     v.add("me", lane="min_0", pos=99.0, speed=0.0)
@@ -1681,8 +1681,9 @@ def test_a_controlled_foe_is_known_by_its_track_wherever_sumo_has_it() -> None:
         return (np.array([r[0] for r in rows], dtype=np.int64), np.array([r[1] for r in rows], dtype=np.int64),
                 np.array([r[2] for r in rows]))
 
-    fleet = SimpleNamespace(stops_ahead=stops_ahead, s_front=lambda slot: fronts[slot])
-    tracks = SimpleNamespace(lanes=SimpleNamespace(names=[":m_0_0", ":x_0_0"]))
+    fleet = SimpleNamespace(stops_ahead=stops_ahead, s_front=lambda slot: fronts[slot],
+                            front_lane_position=lambda slot: (2, 10.0))
+    tracks = SimpleNamespace(lanes=SimpleNamespace(names=[":m_0_0", ":x_0_0", "before_0"]))
     controlled = {"me": SimpleNamespace(slot=0), "bus": SimpleNamespace(slot=1)}
     j = Junctions(conn, net, tracks, fleet, 4.0, controlled=controlled)  # type: ignore[arg-type]
     assert j.approaching_on_tracks() == {":m_0_0": [("bus", pytest.approx(6.0))]}
@@ -1696,8 +1697,14 @@ def test_a_controlled_foe_is_known_by_its_track_wherever_sumo_has_it() -> None:
     fronts[1] = 57.0
     j.new_step()
     assert not j.link_busy("me", 0, ":n_0_0", 100.0)
-    # A SUMO driver where the bus was is not seen (SUMO's own links report it).
+    # On its track's lane to SUMO too: SUMO's links tell, not the track.
     fronts[1] = 50.0
+    v.cars["bus"]["lane"] = "before_0"
+    j.new_step()
+    assert not j.link_busy("me", 0, ":n_0_0", 100.0)
+    v.cars["bus"]["lane"] = "before_1"
+    assert j.link_busy("me", 0, ":n_0_0", 100.0)
+    # A SUMO driver where the bus was is not seen (SUMO's own links report it).
     j.controlled = {"me": controlled["me"]}
     j.new_step()
     assert not j.link_busy("me", 0, ":n_0_0", 100.0)

@@ -895,15 +895,22 @@ class Junctions:
             for other in vehicles_on(incoming):
                 if other != vid and first(other, lane_length - float(get_pos(other)) + theirs - CONFLICT_CLEAR_M, t_cross):
                     return True
-            # A controlled foe is known by its track, wherever SUMO has it:
-            # before the lane in (a lane in of 0.2 m at Bologna's 39a), or
-            # on the lane beside its track's (a 12 m bus swung out of an S
-            # bend, on lane 1 to SUMO, its way through lane 0's link: a car
-            # from the minor road went, and met it).
+            # A controlled foe SUMO has on another lane than its track's is
+            # known by its track: a 12 m bus swung out of an S bend stood on
+            # lane 1 to SUMO while its way went through lane 0's link, and
+            # neither SUMO's links nor the lane in (0.2 m long) showed it;
+            # a car from the minor road went, and met it (Bologna, 39a).
             for other, to_line in self.approaching_on_tracks().get(foe, ()):
-                if other != vid and first(other, to_line + theirs - CONFLICT_CLEAR_M, t_cross):
+                if other != vid and self._off_its_lane(other) \
+                        and first(other, to_line + theirs - CONFLICT_CLEAR_M, t_cross):
                     return True
         return False
+
+    def _off_its_lane(self, vid: str) -> bool:
+        """Does SUMO have the controlled vehicle ``vid`` on another lane than
+        the one its front is on along its track?"""
+        lane, _ = self.fleet.front_lane_position(self.controlled[vid].slot)
+        return bool(self.tracks.lanes.names[lane] != self.conn.get_lane_id(vid))
 
     def approaching_on_tracks(self) -> dict[str, list[tuple[str, float]]]:
         """Per first junction lane of a link: the controlled vehicles whose
