@@ -45,8 +45,8 @@ CONFLICT_CLEAR_M = 2.5
 #: How far ahead along their tracks controlled vehicles are looked for as
 #: foes approaching a link (``Junctions.approaching_on_tracks``).
 APPROACH_LOOK_M = 100.0
-#: At a stop sign or an all-way stop a vehicle counts as having halted when
-#: it stood (SUMO's speed below this, m/s; SUMO's own halting threshold)...
+#: A vehicle counts as standing below this speed (m/s; SUMO's own halting
+#: threshold): at a stop sign or an all-way stop it has halted when it stood...
 HALT_SPEED_MPS = 0.1
 #: ... with its front within this of its stop line (m; it stops
 #: ``standstill_margin_m``, 1 m, short of it).
@@ -108,9 +108,6 @@ def lacks_priority(link: Any) -> bool:
 #: Lanes out shorter than this are not judged by the keep-clear rule: a
 #: short lane between two close junctions holds a queue as long as a car.
 EXIT_MIN_LANE_M = 20.0
-#: A vehicle slower than this on the lane out counts as standing in the
-#: keep-clear rule (SUMO's SUMO_const_haltingSpeed).
-HALT_SPEED_EXIT_MPS = 0.1
 
 
 class Junctions:
@@ -316,7 +313,7 @@ class Junctions:
         """Is there no room for ``vid`` on the lane out of its way ``via``
         behind a standing vehicle (SUMO's drivers' keep-the-junction-clear
         rule, ``MSVehicle::checkRewindLinkLanes``)? The room is the back of
-        the rearmost vehicle standing (below ``HALT_SPEED_EXIT_MPS``) on the
+        the rearmost vehicle standing (below ``HALT_SPEED_MPS``) on the
         lane out, less the length plus minGap of every vehicle between:
         moving ones behind it on that lane, the ones on the way's junction
         lanes and the ones ahead of ``vid`` on its own lane; blocked when
@@ -334,7 +331,7 @@ class Junctions:
         if len(after) < 2 or not network.keeps_clear(via):
             return False
         out, out_len = after[-1]
-        if out_len < EXIT_MIN_LANE_M:
+        if out_len < EXIT_MIN_LANE_M or network.in_roundabout(out.rsplit("_", 1)[0]):
             return False
         conn = self.conn
         veh = conn.sumo.vehicle
@@ -348,9 +345,7 @@ class Junctions:
         brutto = self._brutto
         space, lengths = None, 0.0
         for other in conn.vehicles_on(out):
-            if other != vid and float(get_speed(other)) < HALT_SPEED_EXIT_MPS:
-                if network.in_roundabout(out.rsplit("_", 1)[0]):
-                    return False
+            if other != vid and float(get_speed(other)) < HALT_SPEED_MPS:
                 space = float(get_pos(other)) - float(veh.getLength(other)) - lengths
                 break
             lengths += brutto(other)
