@@ -177,7 +177,7 @@ def test_collisions_are_counted_as_sumo_records_them_under_every_action(net: Pat
     result = run.run()
     # What run_scenario streams as the vehicles finish; the collision count reads the ids from it.
     report.write_vehicles_csv(result.records, out / "vehicles.csv")
-    sumo._count_collisions(result, out)
+    sumo._count_collisions(result, out, run.remote_found)
     assert getattr(run, "_pushed", False)
     root = ET.parse(out / "sumo" / "collisions.xml").getroot()
     events: list[dict[str, Any]] = [c.attrib for c in root.iter("collision")]
@@ -238,7 +238,7 @@ def test_a_collision_inside_a_junction_is_counted_where_the_scenario_does_not_as
     run.step_hooks.append(_put_across)
     result = run.run()
     report.write_vehicles_csv(result.records, out / "vehicles.csv")
-    sumo._count_collisions(result, out)
+    sumo._count_collisions(result, out, run.remote_found)
     assert getattr(run, "_across", False)
     with open(out / "collisions.csv") as f:
         rows = list(csv.DictReader(f))

@@ -113,7 +113,7 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
         ) from None
     finally:
         run.trace.close()
-    _count_collisions(result, out)
+    _count_collisions(result, out, run.remote_found)
     run.incidents.write_csv(out / "red_lights.csv")
     if options.trace:
         report.plot_alpha(out / "trace.csv", out / "alpha.png")
@@ -123,15 +123,20 @@ def _run_here(scenario: Scenario, options: RunOptions, out: Path) -> RunResult:
     return result
 
 
-def _count_collisions(result: RunResult, out: Path) -> None:
-    """Adds SUMO's own collision record to the summary (``collisions_all``,
-    ``collisions_with_controlled``: every collision of the run, counted the
-    same under any ``collision.action``) and writes ``collisions.csv``."""
+def _count_collisions(result: RunResult, out: Path, remote: list[tuple[float, str, str, str, str, str]]) -> None:
+    """Adds SUMO's own collision record, and the lane collisions SUMO skips
+    for vehicles moved by (x, y) under ``collision.action teleport``
+    (``remote``, found by blendtrack: :mod:`blendtrack.sumo.collisions`), to
+    the summary (``collisions_all``, ``collisions_with_controlled``: every
+    collision of the run, counted the same under any ``collision.action``)
+    and writes ``collisions.csv``, in order of time."""
     import csv
 
-    from blendtrack.sumo.outputs import COLLISION_COLUMNS, read_collisions
+    from blendtrack.sumo.outputs import COLLISION_COLUMNS, read_collisions, remote_collision_rows
 
-    rows = read_collisions(out / "sumo" / "collisions.xml", _Ids(out / "vehicles.csv"))
+    ids = _Ids(out / "vehicles.csv")
+    rows = read_collisions(out / "sumo" / "collisions.xml", ids) + remote_collision_rows(remote, ids)
+    rows.sort(key=lambda r: float(r["time_s"]))  # type: ignore[arg-type]
     result.summary["collisions_all"] = len(rows)
     result.summary["collisions_with_controlled"] = sum(int(r["controlled_involved"]) for r in rows)
     with open(out / "collisions.csv", "w", newline="") as f:

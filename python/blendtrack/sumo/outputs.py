@@ -118,8 +118,10 @@ def read_tripinfo(file: Path) -> dict[str, dict[str, float]]:
     return out
 
 
-#: collisions.csv's columns: one row per collision SUMO recorded.
-COLLISION_COLUMNS = ("time_s", "type", "lane", "collider", "victim", "collider_type", "victim_type", "controlled_involved")
+#: collisions.csv's columns: one row per collision, SUMO's own (``detected_by``
+#: "sumo") and the lane collisions SUMO skips for vehicles moved by (x, y)
+#: under ``collision.action teleport`` ("blendtrack"; :mod:`blendtrack.sumo.collisions`).
+COLLISION_COLUMNS = ("time_s", "type", "lane", "collider", "victim", "collider_type", "victim_type", "controlled_involved", "detected_by")
 
 
 def read_collisions(file: Path, controlled: Container[str]) -> list[dict[str, object]]:
@@ -142,8 +144,24 @@ def read_collisions(file: Path, controlled: Container[str]) -> list[dict[str, ob
             "collider_type": c.getAttributeSecure("colliderType", ""),
             "victim_type": c.getAttributeSecure("victimType", ""),
             "controlled_involved": int(collider in controlled or victim in controlled),
+            "detected_by": "sumo",
         })
     return rows
+
+
+def remote_collision_rows(found: list[tuple[float, str, str, str, str, str]], controlled: Container[str]) -> list[dict[str, object]]:
+    """collisions.csv rows of the collisions blendtrack found where SUMO does
+    not look ((time, collider, victim, lane, collider's vType, victim's vType)
+    each; type ``collision``, as SUMO names one along a lane)."""
+    return [
+        {
+            "time_s": t, "type": "collision", "lane": lane, "collider": collider, "victim": victim,
+            "collider_type": ctype, "victim_type": vtype,
+            "controlled_involved": int(collider in controlled or victim in controlled),
+            "detected_by": "blendtrack",
+        }
+        for t, collider, victim, lane, ctype, vtype in found
+    ]
 
 
 def read_ssm_conflicts(file: Path) -> float:

@@ -61,6 +61,7 @@ import numpy as np
 
 import blendtrack
 from blendtrack import RouteFleet
+from blendtrack.sumo.collisions import RemoteCollisions
 from blendtrack.sumo.connection import SumoConnection, loads_ok_marker, sumo_binary
 from blendtrack.sumo.faults import ROUTE_INDEX_SLACK_M, PlacementCheck, repair
 from blendtrack.sumo.geometry import segments_distance
@@ -149,6 +150,11 @@ class SumoRun:
         #: Red-light crossings, emergency brakings and teleports from SUMO's state.
         self.incidents = Incidents(self.conn, self.network)
         self.incidents.step_states = self.junctions.tls_state
+        #: The lane collisions SUMO skips for vehicles moved by (x, y) (set
+        #: up once SUMO runs), and those found: (time, collider, victim, lane,
+        #: collider's vType, victim's vType).
+        self.remote_collisions = RemoteCollisions(None, "", -1.0)
+        self.remote_found: list[tuple[float, str, str, str, str, str]] = []
         self._seen: set[str] = set()
         #: Vehicles left to SUMO (not selected, or not drivable).
         self._background = 0
@@ -195,6 +201,7 @@ class SumoRun:
         # subscriptions then keep the state the step ran under.
         self.conn.subscribe_lights = bool(self.step_hooks)
         self.conn.start()
+        self.remote_collisions = RemoteCollisions(self.conn.sumo.vehicle, *self._collision_options())
         completed = False
         try:
             end = self.opt.end_s if self.opt.end_s is not None else self.scenario.default_end_s
@@ -213,6 +220,20 @@ class SumoRun:
         return RunResult(self.records, self._summary(t_end, steps, wall), self.vehicles.trajectories, self.histograms,
                          self.vehicles.totals)
 
+    def _type_of(self, vid: str) -> str:
+        try:
+            return str(self.conn.sumo.vehicle.getTypeID(vid))
+        except Exception:
+            return ""
+
+    def _collision_options(self) -> tuple[str, float]:
+        """SUMO's ``collision.action`` and ``collision.mingap-factor`` ("" and -1 if not to be read)."""
+        try:
+            get = self.conn.sumo.simulation.getOption
+            return str(get("collision.action")), float(get("collision.mingap-factor"))
+        except Exception:
+            return "", -1.0  # an older SUMO without getOption
+
     def _summary(self, t_end: float, steps: int, wall: float) -> dict[str, Any]:
         totals, counts, lanes = self.vehicles.totals, self.counts, self.lanes.counts
         return {
@@ -228,6 +249,7 @@ class SumoRun:
             "controlled_vehicles": totals.vehicles,
             "background_vehicles": self._background,
             "collisions": counts["collision_events"],
+            "collisions_remote_checked": len(self.remote_found),
             "controlled_vehicles_in_collisions": totals.collisions,
             "teleports": totals.teleports,
             "red_light_violations": totals.red_light_violations,
@@ -299,22 +321,35 @@ class SumoRun:
         """This step's arrivals, teleports, collisions and departures."""
         sumo, tc = self.conn.sumo, self.conn.tc
         ev = sumo.simulation.getSubscriptionResults()
+        remote = self.remote_collisions
         for vid in ev.get(tc.VAR_ARRIVED_VEHICLES_IDS, ()):
+            remote.forget(vid)
             self._drop(vid, t, "arrived")
             self._seen.discard(vid)
             self.sumo_leaders.forget(vid)
         teleporting = ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ())
         self.incidents.teleports(teleporting, self.active)
         for vid in teleporting:
+            remote.forget(vid)
             if vid in self.active:
                 self._drop(vid, t, "teleport")
-        colliding = ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ())
+        colliding = list(ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ()))
+        reported: set[tuple[str, str]] = set()
         if colliding:
             # Events, not vehicles: one collision of two controlled
             # vehicles is one event and two vehicle records.
             for c in sumo.simulation.getCollisions():
+                reported.add((c.collider, c.victim))
                 if c.collider in self.active or c.victim in self.active:
                     self.counts["collision_events"] += 1
+        if remote.active:
+            # The ones SUMO skipped (a vehicle moved by (x, y) under
+            # collision.action teleport): counted and handled alike.
+            for collider, victim, lane in remote.check(t, reported):
+                self.remote_found.append((t, collider, victim, lane, self._type_of(collider), self._type_of(victim)))
+                if collider in self.active or victim in self.active:
+                    self.counts["collision_events"] += 1
+                colliding += [collider, victim]
         for vid in colliding:
             if vid in self.active:
                 self._drop(vid, t, "collision")
@@ -520,11 +555,13 @@ class SumoRun:
         self.moves["lane"] += len(idx)
         idx = np.flatnonzero(moves == _XY)
         edge_names, lanes = self.tracks.edges.names, out["lane"]
+        moved_xy = self.remote_collisions.moved_xy
         xy_cols = (out[k][idx].tolist() for k in ("edge", "lane_index", "x_front_m", "y_front_m", "angle_deg"))
         for i, edge, lane_index, x_front, y_front, angle, sp in zip(idx.tolist(), *xy_cols, speeds[idx].tolist()):
             try:
                 keep = self._keep_route(acts[i], lane_names[lanes[i]], x_front, y_front)
                 move_xy(ids[i], edge_names[edge], lane_index, x_front, y_front, angle, keep)
+                moved_xy(ids[i], t)
                 # Without it SUMO keeps reporting the last setSpeed value,
                 # and followers plan with a wrong leader speed.
                 set_speed(ids[i], sp)

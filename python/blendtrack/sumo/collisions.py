@@ -1,0 +1,120 @@
+"""Collisions SUMO does not look for: along a lane, with a vehicle moved by
+``moveToXY`` in the last 10 s, under ``collision.action teleport``.
+
+SUMO's lane collision check (``MSLane::detectCollisionBetween``) returns
+at once, under ``collision.action teleport`` (SUMO's default), when either
+vehicle is *remote affected*: moved by ``moveToXY`` within the last 10 s
+of simulated time. blendtrack moves controlled vehicles that way inside
+junctions, mid lane change and off their lane's centreline, so under that
+action a rear-end collision with such a vehicle would never reach SUMO's
+collision output, nor ``collisions_all``. (Measured with SUMO 1.28 on the
+shipped ring: a vehicle put onto its leader with ``moveToXY`` every step
+is reported at once under ``warn``, and only 10.1 s after the last
+``moveToXY`` under ``teleport``; ``tests/test_collisions.py``.) SUMO's
+junction check (shapes overlapping inside a junction, with
+``--collision.check-junctions``) has no such exemption.
+
+So, under ``teleport`` only, blendtrack checks every vehicle it moved by
+(x, y) within the window itself, after each SUMO step, by SUMO's own rule:
+the follower's front within ``collision.mingap-factor`` x its ``minGap``
+of the leader's back on the same lane or the lanes ahead (``getLeader``
+and ``getFollower`` give that gap, minus the whole ``minGap``). A pair
+SUMO reported itself in the same step is not counted twice, and a pair
+stays one collision while it stays too close (SUMO would have teleported
+the collider; blendtrack cannot, and counts the overlap once). What the
+check cannot see: the instant of SUMO's own check (after the vehicles'
+moves, before a ``moveToXY`` lands; blendtrack looks after the whole
+step), and collisions under other actions, which SUMO checks in full.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+#: SUMO's window of remote influence (``MSVehicle::Influencer::isRemoteAffected``), s.
+REMOTE_WINDOW_S = 10.0
+#: SUMO's NUMERICAL_EPS: a gap must be below minus this to count.
+NUMERICAL_EPS = 0.001
+#: SUMO's default fraction of minGap below which vehicles have collided
+#: (``collision.mingap-factor`` -1 leaves it to the car-following model,
+#: whose default is 1).
+DEFAULT_MINGAP_FACTOR = 1.0
+
+
+class RemoteCollisions:
+    """The lane collisions SUMO skips for vehicles moved by (x, y) (see the
+    module docs). ``active`` is False under every action but ``teleport``:
+    then SUMO checks every pair itself and this does nothing."""
+
+    def __init__(self, vehicle: Any, action: str, mingap_factor: float) -> None:
+        self.vehicle = vehicle
+        self.active = action == "teleport"
+        self.factor = DEFAULT_MINGAP_FACTOR if mingap_factor < 0 else mingap_factor
+        #: vehicle -> simulated time of its last moveToXY.
+        self._moved: dict[str, float] = {}
+        #: The (collider, victim) pairs too close at the last check.
+        self._touching: set[tuple[str, str]] = set()
+        self._min_gap: dict[str, float] = {}
+
+    def moved_xy(self, vid: str, t: float) -> None:
+        """``vid`` was moved by (x, y) at simulated time ``t``."""
+        if self.active:
+            self._moved[vid] = t
+
+    def forget(self, vid: str) -> None:
+        """``vid`` left the simulation (arrived, or starts a teleport)."""
+        self._moved.pop(vid, None)
+        self._min_gap.pop(vid, None)
+
+    def check(self, t: float, reported: set[tuple[str, str]]) -> list[tuple[str, str, str]]:
+        """New collisions at simulated time ``t`` (after SUMO's step): (collider,
+        victim, lane) of each pair with a vehicle moved by (x, y) within
+        ``REMOTE_WINDOW_S`` (one step of slack) that is closer than SUMO
+        allows, not in ``reported`` (SUMO's own this step) and not too close
+        at the last check already."""
+        if not self._moved:
+            self._touching = set()
+            return []
+        # One step of slack: a pair SUMO checks again is in ``reported``.
+        horizon = t - REMOTE_WINDOW_S - 1.0
+        veh = self.vehicle
+        touching: set[tuple[str, str]] = set()
+        found: list[tuple[str, str, str]] = []
+        for vid in [v for v, when in self._moved.items() if when < horizon]:
+            del self._moved[vid]
+        for vid in self._moved:
+            try:
+                ahead = veh.getLeader(vid, 0.0)
+                behind = veh.getFollower(vid, 0.0)
+            except Exception:
+                continue  # gone (or teleporting): nothing on a lane to check
+            for collider, victim, gap in ((vid, ahead[0] if ahead else "", ahead[1] if ahead else 0.0), (behind[0], vid, behind[1])):
+                if not collider or not victim:
+                    continue
+                # getLeader's gap is the leader's back minus the follower's
+                # front minus the follower's whole minGap.
+                if gap + (1.0 - self.factor) * self._gap_of(collider) >= -NUMERICAL_EPS:
+                    continue
+                pair = (collider, victim)
+                if pair in touching:
+                    continue
+                touching.add(pair)
+                if pair in self._touching or pair in reported:
+                    continue
+                try:
+                    lane = str(veh.getLaneID(collider))
+                except Exception:
+                    lane = ""
+                found.append((collider, victim, lane))
+        self._touching = touching
+        return found
+
+    def _gap_of(self, vid: str) -> float:
+        hit = self._min_gap.get(vid)
+        if hit is None:
+            try:
+                hit = float(self.vehicle.getMinGap(vid))
+            except Exception:
+                hit = 0.0
+            self._min_gap[vid] = hit
+        return hit

@@ -1,0 +1,205 @@
+"""Collisions SUMO skips: along a lane, with a vehicle moved by ``moveToXY``
+in the last 10 s, under ``collision.action teleport``
+(:mod:`blendtrack.sumo.collisions`). On real SUMO, over TraCI (one libsumo
+simulation per process)."""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from blendtrack.sumo import RunOptions
+from blendtrack.sumo.collisions import RemoteCollisions
+from blendtrack.sumo.connection import sumo_binary
+from blendtrack.sumo.scenario import resolve_scenario
+from blendtrack.sumo.runner import SumoRun
+
+
+
+ROUTES = """<routes>
+    <vType id="car" length="5" minGap="2.5"/>
+    <vehicle id="L" type="car" depart="0" departPos="300" departSpeed="0"><route edges="ab"/><stop lane="ab_0" endPos="305" duration="1000"/></vehicle>
+    <vehicle id="F" type="car" depart="0" departPos="100" departSpeed="0"><route edges="ab"/></vehicle>
+    <vehicle id="B" type="car" depart="0" departPos="20" departSpeed="0"><route edges="ab"/></vehicle>
+</routes>
+"""
+
+
+@contextmanager
+def _road(folder: Path, build_net: Any, action: str) -> Iterator[Any]:
+    """A straight 500 m lane eastwards: ``L`` stands at 300 m, ``F`` (the one
+    the tests move) starts at 100 m and ``B`` behind it at 20 m."""
+    import traci
+
+    net = build_net(folder, '<nodes><node id="a" x="0" y="0"/><node id="b" x="500" y="0"/></nodes>',
+                    '<edges><edge id="ab" from="a" to="b" numLanes="1" speed="15"/></edges>')
+    (folder / "r.rou.xml").write_text(ROUTES)
+    traci.start([sumo_binary(), "-n", str(net), "-r", str(folder / "r.rou.xml"), "--collision.action", action,
+                 "--no-step-log", "--no-warnings", "--step-length", "0.1"])
+    try:
+        traci.simulationStep()
+        traci.vehicle.setSpeed("B", 0.0)  # stays well behind
+        yield traci
+    finally:
+        traci.close()
+
+
+def _put_behind(traci: Any, follower: str, leader: str, gap_m: float) -> None:
+    """``follower``'s front ``gap_m`` behind ``leader``'s back, by ``moveToXY`` (the road runs east)."""
+    x, y = traci.vehicle.getPosition(leader)
+    traci.vehicle.moveToXY(follower, "ab", 0, x - traci.vehicle.getLength(leader) - gap_m, y, 90.0, 2)
+    traci.vehicle.setSpeed(follower, 0.0)
+
+
+def _sumo_pairs(traci: Any) -> set[tuple[str, str]]:
+    return {(c.collider, c.victim) for c in traci.simulation.getCollisions()}
+
+
+def test_sumo_skips_a_vehicle_moved_by_xy_under_teleport_and_the_check_finds_it_once(tmp_path: Path, build_net: Any) -> None:
+    with _road(tmp_path, build_net, "teleport") as traci:
+        follower, leader = "F", "L"
+        check = RemoteCollisions(traci.vehicle, "teleport", float(traci.simulation.getOption("collision.mingap-factor")))
+        assert check.active
+        found: list[list[tuple[str, str, str]]] = []
+        sumo_saw: list[set[tuple[str, str]]] = []
+        # 1 m behind the leader's back (inside its 2.5 m minGap: a collision
+        # by SUMO's rule) for 5 steps, then 20 m behind, then 1 m again.
+        for gap in [1.0] * 5 + [20.0] * 3 + [1.0] * 2:
+            _put_behind(traci, follower, leader, gap)
+            check.moved_xy(follower, traci.simulation.getTime())
+            traci.simulationStep()
+            sumo_saw.append(_sumo_pairs(traci))
+            found.append(check.check(traci.simulation.getTime(), sumo_saw[-1]))
+    # SUMO saw none of it (the exemption this module is for) ...
+    assert not any(sumo_saw)
+    # ... and the check counts each stretch of overlap once, when it starts
+    # (a placement lands at the end of the step after the call).
+    hits = [k for k, f in enumerate(found) if f]
+    assert len(hits) == 2 and hits[0] <= 1 and 8 <= hits[1] <= 9, found
+    assert all(f == [(follower, leader, f[0][2])] and f[0][2] for f in found if f)
+
+
+def test_a_gap_kept_and_other_actions_give_nothing(tmp_path: Path, build_net: Any) -> None:
+    with _road(tmp_path, build_net, "teleport") as traci:
+        follower, leader = "F", "L"
+        check = RemoteCollisions(traci.vehicle, "teleport", -1.0)
+        for _ in range(5):
+            _put_behind(traci, follower, leader, 3.0)  # more than the minGap
+            check.moved_xy(follower, traci.simulation.getTime())
+            traci.simulationStep()
+            assert check.check(traci.simulation.getTime(), _sumo_pairs(traci)) == []
+    with _road(tmp_path / "w", build_net, "warn") as traci:
+        follower, leader = "F", "L"
+        check = RemoteCollisions(traci.vehicle, "warn", -1.0)
+        assert not check.active
+        seen = set()
+        for _ in range(3):
+            _put_behind(traci, follower, leader, 1.0)
+            check.moved_xy(follower, traci.simulation.getTime())
+            traci.simulationStep()
+            seen |= _sumo_pairs(traci)
+            assert check.check(traci.simulation.getTime(), set()) == []
+        # Under warn SUMO reports it itself.
+        assert (follower, leader) in seen
+
+
+def test_a_pair_sumo_reported_is_not_counted_again(tmp_path: Path, build_net: Any) -> None:
+    with _road(tmp_path, build_net, "teleport") as traci:
+        follower, leader = "F", "L"
+        check = RemoteCollisions(traci.vehicle, "teleport", -1.0)
+        _put_behind(traci, follower, leader, 1.0)
+        check.moved_xy(follower, traci.simulation.getTime())
+        traci.simulationStep()
+        traci.simulationStep()
+        assert check.check(traci.simulation.getTime(), {(follower, leader)}) == []
+
+
+def test_a_run_under_teleport_counts_a_collision_sumo_skipped(tmp_path: Path) -> None:
+    """End to end on the shipped grid under teleport: right after a
+    controlled vehicle's (x, y) move, one of SUMO's drivers is put 1 m
+    behind it (``moveTo``, which is not remote control). SUMO does not
+    count it; the run does and hands the controlled vehicle back."""
+    planted: list[tuple[str, str]] = []
+
+    def plant(run: SumoRun, t: float) -> None:
+        if planted or t < 30.0:
+            return
+        veh = run.sumo.vehicle
+        moved = [v for v, when in run.remote_collisions._moved.items() if t - when < 2.0 and v in run.active]
+        for vid in moved:
+            lane = veh.getLaneID(vid)
+            back = veh.getLanePosition(vid) - veh.getLength(vid)
+            if lane.startswith(":") or back < 12.0:
+                continue
+            for other in veh.getIDList():
+                if other in run.active or other in run.remote_collisions._moved or veh.getLaneID(other).startswith(":"):
+                    continue
+                try:
+                    veh.moveTo(other, lane, back - 1.0)
+                except Exception:
+                    continue  # the lane is not on its route
+                veh.setSpeed(other, veh.getSpeed(vid))
+                planted.append((other, vid))
+                return
+
+    run = SumoRun(resolve_scenario("urban_grid"),
+                  RunOptions(controlled_fraction=0.5, end_s=60.0, seed=0, progress=False, keep_records=True, sumo_args=("--collision.action", "teleport")),
+                  tmp_path)
+    run.step_hooks.append(plant)
+    result = run.run()
+    assert planted, "no controlled vehicle moved by (x, y) on a normal lane to plant a driver behind"
+    found = [(c, v) for _, c, v, *_ in run.remote_found]
+    assert planted[0] in found
+    assert result.summary["collision_action"] == "teleport"
+    assert result.summary["collisions_remote_checked"] == len(found)
+    assert result.summary["collisions"] >= 1
+    assert {r.vid: r.reason for r in result.records}[planted[0][1]] == "collision"
+
+
+def test_collisions_csv_holds_sumos_and_the_checks_in_time_order(tmp_path: Path) -> None:
+    from blendtrack.sumo import _count_collisions
+    from blendtrack.sumo.records import RunResult
+
+    (tmp_path / "sumo").mkdir()
+    (tmp_path / "sumo" / "collisions.xml").write_text(
+        '<collisions>\n<collision time="10.00" type="junction" lane=":j_0_0" collider="a" victim="b" colliderType="t" victimType="t"/>\n'
+        '<collision time="30.00" type="collision" lane="e_0" collider="c" victim="d" colliderType="t" victimType="t"/>\n</collisions>\n')
+    (tmp_path / "vehicles.csv").write_text("id\nb\nx\n")
+    result = RunResult([], {})
+    _count_collisions(result, tmp_path, [(20.0, "x", "y", "f_1", "car", "bus")])
+    with open(tmp_path / "collisions.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["time_s"], r["collider"], r["detected_by"], r["controlled_involved"]) for r in rows] == [
+        ("10.0", "a", "sumo", "1"), ("20.0", "x", "blendtrack", "1"), ("30.0", "c", "sumo", "0")]
+    assert rows[1]["lane"] == "f_1" and rows[1]["victim_type"] == "bus" and rows[1]["type"] == "collision"
+    assert result.summary == {"collisions_all": 3, "collisions_with_controlled": 2}
+
+
+def test_the_check_forgets_vehicles_that_left(tmp_path: Path) -> None:
+    check = RemoteCollisions(object(), "teleport", -1.0)
+    check.moved_xy("a", 1.0)
+    check.forget("a")
+    assert check.check(2.0, set()) == []
+    inactive = RemoteCollisions(object(), "warn", -1.0)
+    inactive.moved_xy("a", 1.0)
+    assert inactive.check(2.0, set()) == []
+
+
+@pytest.mark.parametrize("factor", [0.0, 0.5])
+def test_the_mingap_factor_sets_how_close_is_a_collision(factor: float, tmp_path: Path, build_net: Any) -> None:
+    with _road(tmp_path, build_net, "teleport") as traci:
+        follower, leader = "F", "L"
+        check = RemoteCollisions(traci.vehicle, "teleport", factor)
+        # 1 m behind the back, minGap 2.5 m: a collision when 1 < factor x 2.5.
+        _put_behind(traci, follower, leader, 1.0)
+        check.moved_xy(follower, traci.simulation.getTime())
+        traci.simulationStep()
+        traci.simulationStep()
+        got = check.check(traci.simulation.getTime(), set())
+    assert bool(got) == (1.0 < factor * 2.5)
