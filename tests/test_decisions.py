@@ -1837,19 +1837,47 @@ def test_a_long_vehicle_moved_by_xy_is_kept_on_its_lane_when_its_front_swings_ou
 
     from blendtrack.sumo.runner import LONG_VEHICLE_M, SumoRun
 
-    lengths = {"coach": 12.0, "sedan": 5.0}
-    asked: list[str] = []
-    selection = SimpleNamespace(type_info=lambda vtype: asked.append(vtype) or {"length": lengths[vtype]})
+    types = {"coach": {"length": 12.0, "width": 2.5}, "sedan": {"length": 5.0, "width": 1.8}}
+    selection = SimpleNamespace(type_info=lambda vtype: types[vtype])
     shape = (np.array([[0.0, 0.0], [100.0, 0.0]]), 3.2)
-    run = SimpleNamespace(selection=selection, network=SimpleNamespace(lane_shape=lambda lane: shape))
+    run = SimpleNamespace(selection=selection, network=SimpleNamespace(lane_shape=lambda lane: shape, edge_lanes=lambda edge: (edge + "_0",)))
     bus = SimpleNamespace(vid="bus", changing=None, record=SimpleNamespace(vtype="coach"))
     car = SimpleNamespace(vid="car", changing=None, record=SimpleNamespace(vtype="sedan"))
     keep = SumoRun._keep_route
-    assert keep(run, bus, "e_0", 50.0, 1.6) == 1  # type: ignore[arg-type]
-    assert keep(run, bus, "e_0", 50.0, -2.4) == 1  # type: ignore[arg-type]
-    assert keep(run, bus, "e_0", 50.0, 1.6 - 1e-9) == 3  # type: ignore[arg-type]
-    assert keep(run, bus, ":j_0_0", 50.0, 2.4) == 3  # type: ignore[arg-type]
-    assert keep(run, car, "e_0", 50.0, 2.4) == 3 and LONG_VEHICLE_M > 5.0  # type: ignore[arg-type]
+    assert keep(run, bus, "e", "e_0", 50.0, 1.6) == 1  # type: ignore[arg-type]
+    assert keep(run, bus, "e", "e_0", 50.0, -2.4) == 1  # type: ignore[arg-type]
+    assert keep(run, bus, "e", "e_0", 50.0, 1.6 - 1e-9) == 3  # type: ignore[arg-type]
+    assert keep(run, bus, ":j_0", ":j_0_0", 50.0, 2.4) == 3  # type: ignore[arg-type]
+    assert keep(run, car, "e", "e_0", 50.0, 2.3) == 3 and LONG_VEHICLE_M > 5.0  # type: ignore[arg-type]
     bus.changing = (1, 1)
-    assert keep(run, bus, "e_0", 50.0, 2.4) == 3  # type: ignore[arg-type]
-    assert asked == ["coach"] * 3 + ["sedan"]
+    assert keep(run, bus, "e", "e_0", 50.0, 2.4) == 3  # type: ignore[arg-type]
+
+
+def test_no_vehicle_is_moved_by_xy_off_the_network() -> None:
+    """``SumoRun._keep_route``: keepRoute 3 lets SUMO take a vehicle off the
+    road when its front is further off the lane than half the lane's and
+    half its own width (1.6 + 0.9 m for a 1.8 m car on a 3.2 m lane); there
+    it is on no lane and nobody sees it. Such a move gets keepRoute 1 (kept
+    on a lane of its route), whatever the vehicle, lane or change; a front
+    that is near another lane of the edge is not off the road."""
+    import numpy as np
+
+    from blendtrack.sumo.runner import OFF_ROAD_MARGIN_M, SumoRun
+
+    types = {"coach": {"length": 12.0, "width": 2.5}, "sedan": {"length": 5.0, "width": 1.8}}
+    shapes = {"e_0": (np.array([[0.0, 0.0], [100.0, 0.0]]), 3.2), "e_1": (np.array([[0.0, 3.2], [100.0, 3.2]]), 3.2)}
+    edges = {"e": ("e_0", "e_1"), ":j_0": ("e_0",)}
+    run = SimpleNamespace(selection=SimpleNamespace(type_info=lambda vtype: types[vtype]),
+                          network=SimpleNamespace(lane_shape=shapes.__getitem__, edge_lanes=edges.__getitem__))
+    car = SimpleNamespace(vid="car", changing=None, record=SimpleNamespace(vtype="sedan"))
+    bus = SimpleNamespace(vid="bus", changing=(1, 1), record=SimpleNamespace(vtype="coach"))
+    keep = SumoRun._keep_route
+    off = 1.6 + 0.9 - OFF_ROAD_MARGIN_M
+    assert keep(run, car, ":j_0", "e_0", 50.0, -off - 1e-6) == 1  # type: ignore[arg-type]
+    assert keep(run, car, ":j_0", "e_0", 50.0, -off + 1e-6) == 3  # type: ignore[arg-type]
+    # Beyond lane 0 but over lane 1 of the same edge: on the road.
+    assert keep(run, car, "e", "e_0", 50.0, off + 1e-6) == 3  # type: ignore[arg-type]
+    assert keep(run, car, "e", "e_0", 50.0, -off - 1e-6) == 1  # type: ignore[arg-type]
+    # A wider vehicle reaches further before it is off the road; a change under way is no exception.
+    assert keep(run, bus, "e", "e_1", 50.0, -2.6) == 3  # type: ignore[arg-type]
+    assert keep(run, bus, "e", "e_1", 50.0, -2.8) == 1  # type: ignore[arg-type]

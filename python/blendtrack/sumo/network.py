@@ -59,6 +59,7 @@ class Network:
         self._into: dict[str, list[tuple[tuple[str, float], ...]]] | None = None
         self._lengths: dict[str, float] = {}
         self._shapes: dict[str, tuple[np.ndarray, float]] = {}
+        self._edge_lanes: dict[str, tuple[str, ...]] = {}
         self._into_merges: frozenset[str] | None = None
         self._not_keep_clear: frozenset[str] | None = None
         self._roundabout_edges: frozenset[str] | None = None
@@ -160,6 +161,14 @@ class Network:
         if hit is None:
             ln = self.net().getLane(lane)
             hit = self._shapes[lane] = (np.asarray(ln.getShape(), dtype=float)[:, :2], float(ln.getWidth()))
+        return hit
+
+    def edge_lanes(self, edge: str) -> tuple[str, ...]:
+        """The lanes of ``edge`` (normal or a junction's), right to left; () for an unknown edge."""
+        hit = self._edge_lanes.get(edge)
+        if hit is None:
+            net = self.net()
+            hit = self._edge_lanes[edge] = tuple(ln.getID() for ln in net.getEdge(edge).getLanes()) if net.hasEdge(edge) else ()
         return hit
 
     def is_zipper(self, via: str) -> bool:

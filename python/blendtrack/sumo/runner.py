@@ -96,6 +96,10 @@ SAMPLE_FOLD_STEPS = 500
 #: that lane's width off its centreline is kept on that lane (``moveToXY``
 #: keepRoute 1) rather than put on the nearest lane (see ``_keep_route``).
 LONG_VEHICLE_M = 8.0
+#: Slack (m) on SUMO's test of whether a vehicle moved by (x, y) with
+#: keepRoute 3 is still on a lane: off by more than half the lane's and
+#: half its own width, SUMO takes it off the network (see ``_keep_route``).
+OFF_ROAD_MARGIN_M = 0.1
 
 # RouteFleet move codes.
 _SPEED, _LANE, _XY, _INVALID, _HOLD = 0, 1, 2, 3, 4
@@ -559,7 +563,7 @@ class SumoRun:
         xy_cols = (out[k][idx].tolist() for k in ("edge", "lane_index", "x_front_m", "y_front_m", "angle_deg"))
         for i, edge, lane_index, x_front, y_front, angle, sp in zip(idx.tolist(), *xy_cols, speeds[idx].tolist()):
             try:
-                keep = self._keep_route(acts[i], lane_names[lanes[i]], x_front, y_front)
+                keep = self._keep_route(acts[i], edge_names[edge], lane_names[lanes[i]], x_front, y_front)
                 move_xy(ids[i], edge_names[edge], lane_index, x_front, y_front, angle, keep)
                 moved_xy(ids[i], t)
                 # Without it SUMO keeps reporting the last setSpeed value,
@@ -576,28 +580,43 @@ class SumoRun:
             self._move_failed(ids[i], acts[i], t)
         self._note(t, ids, acts, out)
 
-    def _keep_route(self, act: Active, lane: str, x_front: float, y_front: float) -> int:
+    def _keep_route(self, act: Active, edge: str, lane: str, x_front: float, y_front: float) -> int:
         """``moveToXY``'s keepRoute for ``act`` moved by (x, y) with its front
-        at (``x_front``, ``y_front``) onto ``lane`` (its track's): 3 (the
-        route's nearest lane, the exact lateral place), or 1 (SUMO keeps the
-        given lane of the edge, the vehicle drawn on its centreline) for a
-        vehicle of ``LONG_VEHICLE_M`` or more, not changing lanes, on a lane
-        that is not a junction's, with its front over half the lane's width
-        off the centreline. SUMO takes the lane given only within half its
-        width; a 12 m bus just out of a tight turn at Bologna's junction 40,
-        its front swung 2.4 m towards lane 1 (the rear axle tracks the
-        lane), stood on lane 1 to SUMO, and SUMO's drivers merging onto lane
-        0 from the junction lane beside drove into it (3 of 13 collisions
-        with a controlled vehicle over seeds 0-11, 30 %; none with this).
-        For every vehicle length the same rule cost arrivals (0.781 -> 0.769
-        of plain SUMO's): cars' fronts that far off are over the other lane."""
-        if act.changing is not None or lane.startswith(":"):
-            return 3
-        # The vType's length, as its body in the fleet (read at takeover).
-        if self.selection.type_info(act.record.vtype)["length"] < LONG_VEHICLE_M:
-            return 3
-        shape, width = self.network.lane_shape(lane)
+        at (``x_front``, ``y_front``) onto ``lane`` of ``edge`` (its track's):
+        3 (the route's nearest lane, the exact lateral place), or 1 (SUMO
+        keeps the vehicle on a lane of its route, drawn on the centreline).
+
+        1 wherever 3 would take the vehicle off the network: keepRoute 3
+        lets it leave the road, and SUMO does so when the front is further
+        off the lane it maps to than half the lane's and half the vehicle's
+        width. Off the network a vehicle is on no lane, so nobody sees it:
+        at Bologna's junction 47 (58[0] -> 58[1], a 2.4 m junction lane
+        turning about 170 deg) a controlled car turning at its smallest
+        radius swung 3 m beyond the lane, stood off the road for three
+        steps, and SUMO's driver behind drove into it (that junction had
+        49 of the 75 collisions with a controlled vehicle over seeds 0-11
+        at 30 % under ``collision.action warn``).
+
+        1 also for a vehicle of ``LONG_VEHICLE_M`` or more, not changing
+        lanes, on a lane that is not a junction's, with its front over half
+        the lane's width off the centreline. SUMO takes the lane given only
+        within half its width; a 12 m bus just out of a tight turn at
+        Bologna's junction 40, its front swung 2.4 m towards lane 1 (the
+        rear axle tracks the lane), stood on lane 1 to SUMO, and SUMO's
+        drivers merging onto lane 0 from the junction lane beside drove into
+        it (3 of 13 collisions with a controlled vehicle over seeds 0-11,
+        30 %; none with this). For every vehicle length the same rule cost
+        arrivals (0.781 -> 0.769 of plain SUMO's): cars' fronts that far off
+        are over the other lane."""
+        info = self.selection.type_info(act.record.vtype)
         front = np.array([[x_front, y_front]])
+        shape_of = self.network.lane_shape
+        reach = 0.5 * info["width"] - OFF_ROAD_MARGIN_M
+        if all(segments_distance(front, shape) >= 0.5 * width + reach for shape, width in map(shape_of, self.network.edge_lanes(edge) or (lane,))):
+            return 1
+        if act.changing is not None or lane.startswith(":") or info["length"] < LONG_VEHICLE_M:
+            return 3
+        shape, width = shape_of(lane)
         return 1 if segments_distance(front, shape) >= 0.5 * width else 3
 
     def _note(self, t: float, ids: list[str], acts: list[Active], out: dict[str, np.ndarray]) -> None:

@@ -134,6 +134,7 @@ class Selection:
             "config": cfg,
             "vehicle": veh,
             "length": length,
+            "width": float(vt.getWidth(vtype)),
             "min_gap": float(vt.getMinGap(vtype)),
             "max_speed": float(vt.getMaxSpeed(vtype)),
         }
