@@ -14,7 +14,7 @@ import numpy as np
 from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.geometry import body_segment, path_ahead, segments_distance
-from blendtrack.sumo.network import Network
+from blendtrack.sumo.network import Network, edge_of
 from blendtrack.sumo.tracks import Tracks
 
 # How far before a junction without priority a vehicle asks SUMO whether foes approach (m).
@@ -95,8 +95,8 @@ def _track_lane_beside(lane: str, track_lanes: list[str]) -> str:
     """The track's junction lane on the junction edge of ``lane`` (SUMO's,
     beside the track's: ``moveToXY`` or its driver's choice of lane at the
     entry can put a vehicle there), or ``lane`` when the track has none."""
-    edge = lane.rsplit("_", 1)[0]
-    return next((x for x in track_lanes if x.startswith(":") and x.rsplit("_", 1)[0] == edge), lane)
+    edge = edge_of(lane)
+    return next((x for x in track_lanes if x.startswith(":") and edge_of(x) == edge), lane)
 
 
 def lacks_priority(link: Any) -> bool:
@@ -331,12 +331,12 @@ class Junctions:
         if len(after) < 2 or not network.keeps_clear(via):
             return False
         out, out_len = after[-1]
-        if out_len < EXIT_MIN_LANE_M or network.in_roundabout(out.rsplit("_", 1)[0]):
+        if out_len < EXIT_MIN_LANE_M or network.in_roundabout(edge_of(out)):
             return False
         conn = self.conn
         veh = conn.sumo.vehicle
         lane = conn.get_lane_id(vid)
-        if lane.startswith(":") or network.in_roundabout(lane.rsplit("_", 1)[0]):
+        if lane.startswith(":") or network.in_roundabout(edge_of(lane)):
             return False
         v = max(float(conn.get_speed(vid)), 0.0)
         if v * v > 2.0 * self.plan_decel * max(gap, 0.0):
