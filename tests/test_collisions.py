@@ -203,3 +203,46 @@ def test_the_mingap_factor_sets_how_close_is_a_collision(factor: float, tmp_path
         traci.simulationStep()
         got = check.check(traci.simulation.getTime(), set())
     assert bool(got) == (1.0 < factor * 2.5)
+
+
+class _FakeSumo:
+    """Vehicle and lane domains over fixed data, for ``_same_way``."""
+
+    def __init__(self, cars: dict[str, tuple[str, float, float]], links: dict[str, list[tuple[str, str]]]) -> None:
+        self.cars, self.links = cars, links
+
+    def getLaneID(self, vid: str) -> str:
+        return self.cars[vid][0]
+
+    def getLanePosition(self, vid: str) -> float:
+        return self.cars[vid][1]
+
+    def getLength(self, vid: str) -> float:
+        return self.cars[vid][2]
+
+    def getLinks(self, lane: str) -> list[tuple[Any, ...]]:
+        return [(to, True, True, False, via, "M", "s", 5.0) for to, via in self.links.get(lane, [])]
+
+
+def test_only_pairs_sumos_lane_check_compares_count() -> None:
+    """Same lane, or the victim's back hanging onto the collider's lane
+    (its front on a lane that lane leads to, directly or by a junction
+    lane): compared. Two lanes that merge further on, a victim wholly on
+    its own lane, a vehicle off the network: not."""
+    links = {"a_0": [("c_0", ":j_0_0")], "b_0": [("c_0", ":j_1_0")]}
+    cars = {
+        "f": ("a_0", 90.0, 5.0), "lead": ("a_0", 95.0, 5.0),
+        "in_j": (":j_0_0", 2.0, 5.0),     # back hangs onto a_0
+        "out": ("c_0", 1.0, 5.0),         # back hangs onto the junction lanes before c_0
+        "other_way": (":j_1_0", 2.0, 5.0),  # from b_0: merges with a_0's way at c_0
+        "clear": (":j_0_0", 6.0, 5.0),    # wholly on the junction lane
+        "gone": ("", 0.0, 5.0),
+    }
+    fake = _FakeSumo(cars, links)
+    check = RemoteCollisions(fake, "teleport", -1.0, fake)
+    assert check._same_way("f", "lead") == "a_0"
+    assert check._same_way("f", "in_j") == "a_0"
+    assert check._same_way("f", "out") == "a_0"
+    assert check._same_way("f", "other_way") is None
+    assert check._same_way("f", "clear") is None
+    assert check._same_way("f", "gone") is None and check._same_way("gone", "f") is None

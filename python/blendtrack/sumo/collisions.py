@@ -17,8 +17,9 @@ junction check (shapes overlapping inside a junction, with
 So, under ``teleport`` only, blendtrack checks every vehicle it moved by
 (x, y) within the window itself, after each SUMO step, by SUMO's own rule:
 the follower's front within ``collision.mingap-factor`` x its ``minGap``
-of the leader's back on the same lane or the lanes ahead (``getLeader``
-and ``getFollower`` give that gap, minus the whole ``minGap``). A pair
+of the leader's back (``getLeader`` and ``getFollower`` give that gap,
+minus the whole ``minGap``), where SUMO would compare the two: on the
+same lane, or the leader's back hanging onto the follower's lane. A pair
 SUMO reported itself in the same step is not counted twice, and a pair
 stays one collision while it stays too close (SUMO would have teleported
 the collider; blendtrack cannot, and counts the overlap once). What the
@@ -46,8 +47,11 @@ class RemoteCollisions:
     module docs). ``active`` is False under every action but ``teleport``:
     then SUMO checks every pair itself and this does nothing."""
 
-    def __init__(self, vehicle: Any, action: str, mingap_factor: float) -> None:
+    def __init__(self, vehicle: Any, action: str, mingap_factor: float, lane: Any = None) -> None:
         self.vehicle = vehicle
+        #: SUMO's lane domain (the links out of a lane), for ``_same_way``.
+        self.lane = lane
+        self._next: dict[str, frozenset[str]] = {}
         self.active = action == "teleport"
         self.factor = DEFAULT_MINGAP_FACTOR if mingap_factor < 0 else mingap_factor
         #: vehicle -> simulated time of its last moveToXY.
@@ -98,16 +102,39 @@ class RemoteCollisions:
                 pair = (collider, victim)
                 if pair in touching:
                     continue
+                lane = self._same_way(collider, victim)
+                if lane is None:
+                    continue
                 touching.add(pair)
                 if pair in self._touching or pair in reported:
                     continue
-                try:
-                    lane = str(veh.getLaneID(collider))
-                except Exception:
-                    lane = ""
                 found.append((collider, victim, lane))
         self._touching = touching
         return found
+
+    def _same_way(self, collider: str, victim: str) -> str | None:
+        """The collider's lane if SUMO's lane check would compare the two
+        there: both on that lane, or the victim's back on it (the victim's
+        front on a lane that lane leads to, directly or through a junction
+        lane); None otherwise (``getLeader`` and ``getFollower`` also report
+        vehicles on lanes that merge further on, which SUMO's lane check
+        does not compare)."""
+        veh = self.vehicle
+        try:
+            a, b = str(veh.getLaneID(collider)), str(veh.getLaneID(victim))
+            if not a or not b:
+                return None  # off the network: on no lane
+            if a == b:
+                return a
+            if float(veh.getLanePosition(victim)) - float(veh.getLength(victim)) >= 0.0:
+                return None  # its back is on its own lane only
+            nxt = self._next.get(a)
+            if nxt is None:
+                links = self.lane.getLinks(a) if self.lane is not None else ()
+                nxt = self._next[a] = frozenset(x for link in links for x in (str(link[0]), str(link[4])) if x)
+        except Exception:
+            return None
+        return a if b in nxt else None
 
     def _gap_of(self, vid: str) -> float:
         hit = self._min_gap.get(vid)

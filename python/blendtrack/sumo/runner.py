@@ -174,7 +174,7 @@ class SumoRun:
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         #: Moves by kind (see RouteFleet): speed only, nothing to send,
         #: (lane, position), (x, y, angle).
-        self.moves = {"speed": 0, "none": 0, "lane": 0, "xy": 0}
+        self.moves = {"speed": 0, "none": 0, "lane": 0, "xy": 0, "xy_on_track": 0}
         #: (time, vehicle, traffic light, link index, stop line arc length) of each red-light crossing.
         self.violations: list[tuple[Any, ...]] = []
 
@@ -205,7 +205,7 @@ class SumoRun:
         # subscriptions then keep the state the step ran under.
         self.conn.subscribe_lights = bool(self.step_hooks)
         self.conn.start()
-        self.remote_collisions = RemoteCollisions(self.conn.sumo.vehicle, *self._collision_options())
+        self.remote_collisions = RemoteCollisions(self.conn.sumo.vehicle, *self._collision_options(), self.conn.sumo.lane)
         completed = False
         try:
             end = self.opt.end_s if self.opt.end_s is not None else self.scenario.default_end_s
@@ -272,6 +272,7 @@ class SumoRun:
             "moves_none": self.moves["none"],
             "moves_lane_position": self.moves["lane"],
             "moves_xy": self.moves["xy"],
+            "moves_xy_on_track": self.moves["xy_on_track"],
             "reroutes": counts["reroutes"],
             "placement_faults": counts["placement_faults"],
             "route_index_repairs": counts["route_index_repairs"],
@@ -572,6 +573,7 @@ class SumoRun:
             except Exception:
                 failed.append(i)
         self.moves["xy"] += len(idx)
+        self.moves["xy_on_track"] += int(np.count_nonzero(out["xy_on_track"]))
         for i in np.flatnonzero(moves == _INVALID).tolist():
             # Unusable state (NaN): hand the vehicle back rather than move it anywhere.
             self._drop(ids[i], t, "invalid_state")

@@ -803,6 +803,7 @@ impl RouteFleet {
             ("past_route_end", r.past_route_end),
             ("lane_change_due", r.lane_change_due),
             ("read_position", r.read_position),
+            ("xy_on_track", r.xy_on_track),
         ] {
             d.set_item(k, col.into_pyarray(py))?;
         }

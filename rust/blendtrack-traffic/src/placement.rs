@@ -292,7 +292,7 @@ mod tests {
             .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;
         let mut off = at(50.0, 10.0);
-        off.y_m = 2.0;
+        off.y_m = 0.5;
         let b = f.add_vehicle(t, None, None, body(), off, None).unwrap() as i64;
         let c = f
             .add_vehicle(t, None, None, body(), at(594.0, 10.0), None)
@@ -311,6 +311,7 @@ mod tests {
                 < 1e-9
         );
         assert_eq!(out.read_position, [false, true, true]);
+        assert_eq!(out.xy_on_track, [false, false, false]);
         // On the junction lane (not plain) even a centred vehicle moves by (x, y).
         let d = f
             .add_vehicle(t, None, None, body(), at(200.0, 10.0), None)
@@ -323,6 +324,30 @@ mod tests {
         let out = step(&mut f, &[e], false).1;
         let sf = f.s_front(e).unwrap();
         assert!((out.lane_pos_m[0] - ((sf - 210.0) * 1.01 - out.v_mps[0] * DT)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn a_front_far_off_its_track_is_put_on_the_track() {
+        // The road's track runs along y = 0 heading east. A front 2.5 m off
+        // it (more than XY_ON_TRACK_M) is given to the simulator at the
+        // track's point at the front's arc length, heading along the track;
+        // one 0.8 m off keeps its own place.
+        let (mut f, t) = fleet_on(road(None, true));
+        let mut far = at(50.0, 10.0);
+        far.y_m = 2.5;
+        let mut near = at(80.0, 10.0);
+        near.y_m = 0.8;
+        let a = f.add_vehicle(t, None, None, body(), far, None).unwrap() as i64;
+        let b = f.add_vehicle(t, None, None, body(), near, None).unwrap() as i64;
+        let (_, out) = step(&mut f, &[a, b], false);
+        assert_eq!(out.moves, [Move::Xy, Move::Xy]);
+        assert_eq!(out.xy_on_track, [true, false]);
+        let sf = f.s_front(a).unwrap();
+        assert!((out.x_front_m[0] - sf).abs() < 1e-6 && out.y_front_m[0].abs() < 1e-9, "{out:?}");
+        assert!((out.angle_deg[0] - 90.0).abs() < 1e-9);
+        let s = f.state(b).unwrap();
+        assert!((out.y_front_m[1] - s.y_m - 3.5 * s.theta_rad.sin()).abs() < 1e-9);
+        assert!(crate::step::XY_ON_TRACK_M > 0.8 && crate::step::XY_ON_TRACK_M < 2.5);
     }
 
     #[test]

@@ -15,6 +15,15 @@ use blendtrack::path::wrap_angle;
 use blendtrack::{Fleet, FleetInputs, FleetOutputs, NextStates, VehicleState};
 use nalgebra::Point2;
 
+/// A vehicle moved by (x, y) whose front is further than this (m) off its
+/// track is put into the simulator at the track's point at the front's arc
+/// length instead: the simulator maps a front point onto the nearest lane,
+/// and where a turn is tighter than the vehicle can drive (at Bologna's
+/// junction 47 a 2.4 m junction lane turns about 170 deg) the front, swung
+/// 2-3 m wide, mapped onto the start of the junction lane, metres behind
+/// the vehicle's progress, into the minGap of the vehicle behind.
+pub const XY_ON_TRACK_M: f64 = 1.0;
+
 /// One step's results, one entry per planned slot, in the plan's order.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct RouteOutputs {
@@ -24,7 +33,10 @@ pub struct RouteOutputs {
     pub lane_pos_m: Vec<f64>,
     pub edge: Vec<u32>,
     pub lane_index: Vec<u32>,
-    /// Front-bumper point and SUMO angle (deg, clockwise from north).
+    /// Front-bumper point and SUMO angle (deg, clockwise from north); for
+    /// a [`Move::Xy`] with the front over [`XY_ON_TRACK_M`] off the track,
+    /// the track's point and heading at the front's arc length instead
+    /// (`xy_on_track`).
     pub x_front_m: Vec<f64>,
     pub y_front_m: Vec<f64>,
     pub angle_deg: Vec<f64>,
@@ -55,6 +67,8 @@ pub struct RouteOutputs {
     /// Report the simulator's lane and lane position next step: unknown to
     /// blendtrack, or due for a check of the prediction.
     pub read_position: Vec<bool>,
+    /// A move by (x, y) given the track's point, not the front (see `x_front_m`).
+    pub xy_on_track: Vec<bool>,
     /// The speed to give the simulator (m/s): the vehicle's own, or for a
     /// speed-only move the one that carries the front to its new place.
     pub sumo_speed_mps: Vec<f64>,
@@ -89,6 +103,7 @@ impl RouteOutputs {
             red_light: Vec::with_capacity(n),
             lane_change_due: Vec::with_capacity(n),
             read_position: Vec::with_capacity(n),
+            xy_on_track: Vec::with_capacity(n),
             sumo_speed_mps: Vec::with_capacity(n),
         }
     }
@@ -306,10 +321,25 @@ impl RouteFleet {
         r.lane_pos_m.push(p.pos);
         r.edge.push(piece.edge);
         r.lane_index.push(piece.lane_index);
-        r.x_front_m.push(xf);
-        r.y_front_m.push(yf);
+        // What the simulator is given for a move by (x, y): the front, or,
+        // with the front further off the track than XY_ON_TRACK_M (a turn
+        // tighter than the vehicle can drive), the track's point at the
+        // front's arc length, heading along the track.
+        let (mut x_put, mut y_put, mut th_put) = (xf, yf, th);
+        let mut on_track = false;
+        if p.mv == Move::Xy {
+            let path = &self.fleet.track(self.fleet.vehicle_track(slot as i64)? as i64)?.path;
+            let at = path.point_at(sf_new);
+            if (at - Point2::new(xf, yf)).norm() > XY_ON_TRACK_M {
+                (x_put, y_put, th_put) = (at.x, at.y, path.heading_at(sf_new));
+                on_track = true;
+            }
+        }
+        r.x_front_m.push(x_put);
+        r.y_front_m.push(y_put);
         r.angle_deg
-            .push((90.0 - wrap_angle(th).to_degrees()).rem_euclid(360.0));
+            .push((90.0 - wrap_angle(th_put).to_degrees()).rem_euclid(360.0));
+        r.xy_on_track.push(on_track);
         r.x_m.push(state.x_m);
         r.y_m.push(state.y_m);
         r.theta_rad.push(th);
