@@ -246,3 +246,18 @@ def test_only_pairs_sumos_lane_check_compares_count() -> None:
     assert check._same_way("f", "other_way") is None
     assert check._same_way("f", "clear") is None
     assert check._same_way("f", "gone") is None and check._same_way("gone", "f") is None
+
+
+def test_a_compare_counts_the_collisions_blendtrack_found(tmp_path: Path) -> None:
+    """The compare's collision count is SUMO's statistics plus the rows of
+    ``collisions.csv`` blendtrack found where SUMO does not look."""
+    from blendtrack.sumo.outputs import COLLISION_COLUMNS, count_remote_collisions
+
+    f = tmp_path / "collisions.csv"
+    with open(f, "w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=COLLISION_COLUMNS)
+        w.writeheader()
+        for by in ("sumo", "blendtrack", "blendtrack"):
+            w.writerow({k: "" for k in COLLISION_COLUMNS} | {"detected_by": by})
+    assert count_remote_collisions(f) == 2
+    assert count_remote_collisions(tmp_path / "none.csv") == 0

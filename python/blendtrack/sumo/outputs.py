@@ -4,6 +4,7 @@ output."""
 
 from __future__ import annotations
 
+import csv
 import math
 from array import array
 from collections.abc import Container
@@ -162,6 +163,15 @@ def remote_collision_rows(found: list[tuple[float, str, str, str, str, str]], co
         }
         for t, collider, victim, lane, ctype, vtype in found
     ]
+
+
+def count_remote_collisions(file: Path) -> int:
+    """The rows of a run's ``collisions.csv`` that blendtrack found where SUMO
+    does not look (``detected_by`` "blendtrack"); 0 without the file (a plain run)."""
+    if not Path(file).is_file():
+        return 0
+    with open(file, newline="") as f:
+        return sum(1 for r in csv.DictReader(f) if r.get("detected_by") == "blendtrack")
 
 
 def read_ssm_conflicts(file: Path) -> float:

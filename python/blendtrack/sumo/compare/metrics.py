@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from blendtrack.reporting import mean_ci
-from blendtrack.sumo.outputs import Track, lateral_series, read_fcd, read_ssm_conflicts, read_statistics, read_tripinfo
+from blendtrack.sumo.outputs import Track, count_remote_collisions, lateral_series, read_fcd, read_ssm_conflicts, read_statistics, read_tripinfo
 
 #: Per-vehicle metrics: (name, label, unit, lower is better?).
 VEHICLE_METRICS: tuple[tuple[str, str, str], ...] = (
@@ -76,6 +76,9 @@ def load_run(out: Path, is_controlled: Callable[[str, str], bool]) -> RunData:
     controlled = {v for v, tr in fcd.items() if is_controlled(v, tr.vtype)}
     trips = read_tripinfo(sd / "tripinfo.xml")
     collisions, teleports = read_statistics(sd / "statistics.xml")
+    # SUMO's count, and the lane collisions it skips under teleport for
+    # vehicles moved by (x, y), which blendtrack found (blendtrack.sumo.collisions).
+    collisions += count_remote_collisions(out / "collisions.csv")
 
     def mean_of(ids: list[str], key: str) -> float:
         vals = [trips[i][key] for i in ids]
