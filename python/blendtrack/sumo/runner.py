@@ -614,12 +614,17 @@ class SumoRun:
         front = np.array([[x_front, y_front]])
         shape_of = self.network.lane_shape
         reach = 0.5 * info["width"] - OFF_ROAD_MARGIN_M
-        if all(segments_distance(front, shape) >= 0.5 * width + reach for shape, width in map(shape_of, self.network.edge_lanes(edge) or (lane,))):
+        # The track's lane first: the front is over it in all but a few moves.
+        own, own_width = shape_of(lane)
+        off = segments_distance(front, own)
+        if off >= 0.5 * own_width + reach and all(
+            segments_distance(front, shape) >= 0.5 * width + reach
+            for shape, width in map(shape_of, [x for x in self.network.edge_lanes(edge) if x != lane])
+        ):
             return 1
         if act.changing is not None or lane.startswith(":") or info["length"] < LONG_VEHICLE_M:
             return 3
-        shape, width = shape_of(lane)
-        return 1 if segments_distance(front, shape) >= 0.5 * width else 3
+        return 1 if off >= 0.5 * own_width else 3
 
     def _note(self, t: float, ids: list[str], acts: list[Active], out: dict[str, np.ndarray]) -> None:
         """What the step found: positions to read, red-light crossings, lane
