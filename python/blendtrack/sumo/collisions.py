@@ -96,8 +96,10 @@ class RemoteCollisions:
                 if not collider or not victim:
                     continue
                 # getLeader's gap is the leader's back minus the follower's
-                # front minus the follower's whole minGap.
-                if gap + (1.0 - self.factor) * self._gap_of(collider) >= -NUMERICAL_EPS:
+                # front minus the follower's whole minGap (all of it counts
+                # at SUMO's default factor of 1).
+                slack = 0.0 if self.factor == 1.0 else (1.0 - self.factor) * self._gap_of(collider)
+                if gap + slack >= -NUMERICAL_EPS:
                     continue
                 pair = (collider, victim)
                 if pair in touching:

@@ -511,8 +511,13 @@ class LaneChanges:
                     follower = (at, other)
             elif leader is None or at < leader[0]:
                 leader = (at, other)
-        followers = [(back - at - float(v.getMinGap(o)), float(get_speed(o))) for at, o in ([follower] if follower else [])]
-        leaders = [(at - float(v.getLength(o)) - front - float(v.getMinGap(vid)), float(get_speed(o))) for at, o in ([leader] if leader else [])]
+        followers, leaders = [], []
+        if follower is not None:
+            at, o = follower
+            followers.append((back - at - float(v.getMinGap(o)), float(get_speed(o))))
+        if leader is not None:
+            at, o = leader
+            leaders.append((at - float(v.getLength(o)) - front - float(v.getMinGap(vid)), float(get_speed(o))))
         duration = change_duration(speed, length, self.plan_accel)
         return self.target_lane_clear(vid, 0, length / duration, duration, (followers, leaders))
 

@@ -23,10 +23,10 @@ INSIDE_LANE_REACH_M = 3.0
 WAITING_BODY_M = 5.0
 
 
-
 def edge_of(lane: str) -> str:
     """The edge of the lane id ``lane`` (SUMO's lane ids are ``<edge>_<index>``)."""
     return lane.rsplit("_", 1)[0]
+
 
 class Network:
     """The network of one scenario, read once (with its internal lanes) when first needed."""
