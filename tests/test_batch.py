@@ -12,6 +12,7 @@ import math
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -226,10 +227,20 @@ def test_dask_local_cluster_gives_the_same_metrics_as_local_processes(
 ) -> None:
     sweep, local_out, _ = local_batch
     out = tmp_path / "dask"
-    r = _cli("batch", str(sweep), "--dask-local", "2", "--out", str(out))
+    # Dask's scheduler serves HTTP on 8787 by default and warns when the port
+    # is taken (another batch, a notebook's cluster): held here if free.
+    with socket.socket() as held:
+        try:
+            held.bind(("", 8787))
+            held.listen()
+        except OSError:
+            pass  # taken already: the case this checks
+        r = _cli("batch", str(sweep), "--dask-local", "2", "--out", str(out))
     assert r.returncode == 0, r.stderr
     assert "Dask LocalCluster, 2 worker processes" in r.stdout
-    assert "Traceback" not in r.stderr and "Warning" not in r.stderr, r.stderr
+    # Nothing from the cluster's start or shutdown (a worker's last heartbeat
+    # racing the scheduler's close printed a traceback once in CI).
+    assert "traceback" not in r.stderr.lower() and "warning" not in r.stderr.lower(), r.stderr
     local, dask = _records(local_out), _records(out)
     assert set(dask) == set(local) and len(dask) == 4
     for rid, rec in dask.items():

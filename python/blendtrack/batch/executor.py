@@ -217,6 +217,11 @@ def _blendtrack_version() -> str:
     return str(blendtrack.__version__)
 
 
+def _stop_heartbeat(dask_worker: Any) -> None:
+    """Run on each worker of our own LocalCluster before it closes."""
+    dask_worker.periodic_callbacks["heartbeat"].stop()
+
+
 class DaskExecutor:
     """Runs on a Dask cluster: a new ``LocalCluster`` of ``local_workers``
     single-threaded processes, or the scheduler at ``address``."""
@@ -253,8 +258,11 @@ class DaskExecutor:
                         n_workers=self.local_workers,
                         threads_per_worker=1,
                         processes=True,
-                        # No dashboard: nothing to bind (or warn about) on a busy port.
+                        # No dashboard. The scheduler still serves its health
+                        # routes over HTTP, by default on 8787, and warns when
+                        # that port is taken (a second batch): a free port.
                         dashboard_address=None,
+                        scheduler_kwargs={"dashboard": False, "dashboard_address": ":0"},
                         # A task only waits for its run process, whose memory is its own.
                         memory_limit=0,
                     )
@@ -286,6 +294,15 @@ class DaskExecutor:
 
     def __exit__(self, *exc: object) -> None:
         if self._client is not None:
+            if self._cluster is not None:
+                # A worker whose heartbeat is on its way while the cluster closes
+                # logs "Failed to communicate with scheduler" with a traceback:
+                # a race in Dask's shutdown, not a fault of the batch. Our own
+                # workers stop beating before they are closed.
+                try:
+                    self._client.run(_stop_heartbeat, on_error="ignore")
+                except Exception:
+                    pass
             try:
                 self._client.close()
             except Exception:
