@@ -370,5 +370,6 @@ def polyline_join(
     sigma_pts: float,
     near_m: float,
     min_run: int,
+    kappa_max: float = 0.0,
 ) -> dict[str, Any]: ...
 def polyline_distance(p: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> float: ...

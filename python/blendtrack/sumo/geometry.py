@@ -57,6 +57,13 @@ from blendtrack._blendtrack import (
 NEAR_LANE_M = 0.06
 MIN_RUN_PTS = 4
 
+#: Turns of the smoothed track sharper than this radius (m) are rounded off
+#: (``blendtrack::polyline::turns``): kinks of the map that no car follows,
+#: such as a lane that overshoots its junction and comes back. A car of the
+#: default wheelbase (2.6 m) and steering limit (40 deg) turns its front axle
+#: on a circle of about 4 m at full lock.
+MIN_TURN_RADIUS_M = 4.0
+
 
 @dataclass
 class RouteGeometry:
@@ -102,6 +109,10 @@ class RouteGeometry:
     stops: list[tuple[float, str, int, bool, str, float]] = field(default_factory=list)
     #: Route edges this geometry was built for.
     edges: tuple[str, ...] = field(default_factory=tuple)
+    #: Turns rounded off (``MIN_TURN_RADIUS_M``): where each sharp stretch
+    #: starts and ends (arc length, m) and the peak |curvature| (1/m) left
+    #: in it, above 1 / radius where no rounding tried got under it.
+    rounded: list[tuple[float, float, float]] = field(default_factory=list)
     #: (edge index in ``edges``, target lane index) when a lane change is
     #: due: the track stops at the end of a lane that does not continue.
     pending_change: tuple[int, int] | None = None
@@ -470,6 +481,7 @@ def route_geometry(
     border_margin_m: float = 0.0,
     carriageway: bool = False,
     prefer: dict[int, int] | None = None,
+    min_turn_radius_m: float = MIN_TURN_RADIUS_M,
 ) -> RouteGeometry:
     """Builds the reference track of a vehicle on ``edges`` starting in lane ``start_lane_index``.
 
@@ -485,7 +497,9 @@ def route_geometry(
     ``border_margin_m``; with ``carriageway`` a normal lane's are the
     distances to the edges of its whole edge (junction lanes keep their half
     width; a lane change's are the carriageway's anyway). ``prefer``: lanes
-    to take where the route allows (see ``_pieces``).
+    to take where the route allows (see ``_pieces``). Stretches of the
+    smoothed track still sharper than ``min_turn_radius_m`` are smoothed
+    again, more widely, until they are not (0: left as they are).
     Raises :class:`blendtrack.PathError` for an empty or undrivable route.
     """
     if len(edges) == 0:
@@ -504,6 +518,7 @@ def route_geometry(
         smoothing_m / spacing_m,
         NEAR_LANE_M,
         MIN_RUN_PTS,
+        1.0 / min_turn_radius_m if min_turn_radius_m > 0 else 0.0,
     )
     wid: list[np.ndarray] = []
     stops: list[tuple[float, str, int, bool, str, float]] = []
@@ -547,6 +562,7 @@ def route_geometry(
         pending_early=early,
         stops=stops,
         edges=tuple(edges),
+        rounded=[(float(a), float(b), float(k)) for a, b, k in joined["rounded"]],
     )
 
 

@@ -137,14 +137,18 @@ type PieceIn<'py> = (
 /// into one smoothed track (`blendtrack::polyline::chain`). Returns a dict:
 /// `points` (M, 2), `length_m`, per kept piece `kept` (input index),
 /// `kept_points`, `start_s`, `before_s`, `entry_s`, and per run `run_piece`
-/// (input index), `run_start_s`, `run_station`, `run_scale`, `run_offset`.
+/// (input index), `run_start_s`, `run_station`, `run_scale`, `run_offset`,
+/// and `rounded`: (start, end, peak |curvature| left) of each stretch
+/// sharper than `kappa_max` (1/m; 0: no limit) that was rounded off.
 #[pyfunction]
+#[pyo3(signature = (pieces, sigma_pts, near_m, min_run, kappa_max = 0.0))]
 pub fn polyline_join<'py>(
     py: Python<'py>,
     pieces: Vec<PieceIn<'py>>,
     sigma_pts: f64,
     near_m: f64,
     min_run: usize,
+    kappa_max: f64,
 ) -> PyResult<Bound<'py, PyDict>> {
     let mut input = Vec::with_capacity(pieces.len());
     for (i, (points, station, on_reference, station_scale)) in pieces.iter().enumerate() {
@@ -156,7 +160,7 @@ pub fn polyline_join<'py>(
         });
     }
     let ch = py
-        .detach(|| chain::join(&input, sigma_pts, near_m, min_run))
+        .detach(|| chain::join(&input, sigma_pts, kappa_max, near_m, min_run))
         .map_err(geometry_error)?;
     let d = PyDict::new(py);
     d.set_item("points", xy_array(py, &ch.points)?)?;
@@ -175,6 +179,7 @@ pub fn polyline_join<'py>(
     d.set_item("run_station", col(|r| r.station))?;
     d.set_item("run_scale", col(|r| r.scale))?;
     d.set_item("run_offset", col(|r| r.offset))?;
+    d.set_item("rounded", ch.rounded)?;
     Ok(d)
 }
 

@@ -11,6 +11,7 @@
 //! start and the station gained per metre of track. A caller can then map a
 //! position on the track to (piece, station) and back on a run that is near.
 
+use super::turns::round_sharp_turns;
 use super::{
     arc_lengths, check_points, distance, gradient, interp, length, smooth, PolylineError, Xy,
 };
@@ -65,6 +66,10 @@ pub struct Chain {
     pub entry_s: Vec<f64>,
     /// The runs, in order along the track.
     pub runs: Vec<Run>,
+    /// The turns rounded off ([`super::turns`]): where each sharp stretch
+    /// starts and ends on the smoothed track, and the peak |curvature| (1/m)
+    /// left in it.
+    pub rounded: Vec<(f64, f64, f64)>,
 }
 
 /// Unsmoothed concatenation: points, and per kept piece (input index, range
@@ -186,17 +191,20 @@ fn check(pieces: &[ChainPiece]) -> Result<(), PolylineError> {
 }
 
 /// Joins `pieces` (see the module docs), smoothing with a Gaussian of
-/// `sigma_pts` points; a run is near where the smoothed track is within
-/// `near_m` of the piece's points for at least `min_run` points.
+/// `sigma_pts` points and rounding off what is still sharper than
+/// `kappa_max` (1/m; 0 for no limit, see [`super::turns`]); a run is near
+/// where the smoothed track is within `near_m` of the piece's points for at
+/// least `min_run` points.
 pub fn join(
     pieces: &[ChainPiece],
     sigma_pts: f64,
+    kappa_max: f64,
     near_m: f64,
     min_run: usize,
 ) -> Result<Chain, PolylineError> {
     check(pieces)?;
     let j = concatenate(pieces);
-    let points = smooth(&j.raw, sigma_pts);
+    let (points, rounding) = round_sharp_turns(&smooth(&j.raw, sigma_pts), sigma_pts, kappa_max);
     let (s_raw, s_sm) = (arc_lengths(&j.raw), arc_lengths(&points));
     let on_smoothed = |x: f64| interp(x, &s_raw, &s_sm);
     let start_s: Vec<f64> = j.start.iter().map(|&x| on_smoothed(x)).collect();
@@ -252,6 +260,12 @@ pub fn join(
         }
     }
     Ok(Chain {
+        rounded: rounding
+            .stretches
+            .iter()
+            .zip(&rounding.peak_after)
+            .map(|(&(a, b), &k)| (s_sm[a], s_sm[b], k))
+            .collect(),
         length: s_sm[s_sm.len() - 1],
         kept: j.kept.iter().map(|k| k.0).collect(),
         kept_points: j.kept.iter().map(|k| k.3).collect(),

@@ -15,6 +15,7 @@
 //! `sqrt(dx^2 + dy^2)`, which can differ from these in the last bit.
 
 pub mod chain;
+pub mod turns;
 
 use thiserror::Error;
 

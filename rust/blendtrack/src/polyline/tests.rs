@@ -245,7 +245,14 @@ fn chain_of_straight_pieces_shares_points_and_keeps_stations() {
     let b: Vec<Xy> = (10..=20).map(|i| [i as f64, 0.0]).collect();
     // A piece after a 1 m gap (evenly spaced, so the smoothing moves nothing).
     let c: Vec<Xy> = (21..=30).map(|i| [i as f64, 0.0]).collect();
-    let ch = join(&[piece(a, 1.0), piece(b, 2.0), piece(c, 1.0)], 1.5, 0.06, 4).unwrap();
+    let ch = join(
+        &[piece(a, 1.0), piece(b, 2.0), piece(c, 1.0)],
+        1.5,
+        0.0,
+        0.06,
+        4,
+    )
+    .unwrap();
     assert_eq!(ch.points.len(), 11 + 10 + 10);
     assert_eq!(ch.length, 30.0);
     assert_eq!(ch.kept, vec![0, 1, 2]);
@@ -268,7 +275,7 @@ fn chain_of_straight_pieces_shares_points_and_keeps_stations() {
 fn chain_splits_a_piece_where_smoothing_rounds_a_corner() {
     let a: Vec<Xy> = (0..=20).map(|i| [i as f64, 0.0]).collect();
     let b: Vec<Xy> = (0..=20).map(|i| [20.0, i as f64]).collect();
-    let ch = join(&[piece(a, 1.0), piece(b, 1.0)], 1.5, 0.06, 4).unwrap();
+    let ch = join(&[piece(a, 1.0), piece(b, 1.0)], 1.5, 0.0, 0.06, 4).unwrap();
     assert_eq!(ch.kept_points, vec![21, 20]);
     // Near, away (the corner), near again on each side: the corner's run is far.
     let of_a: Vec<_> = ch.runs.iter().filter(|r| r.piece == 0).collect();
@@ -278,18 +285,18 @@ fn chain_splits_a_piece_where_smoothing_rounds_a_corner() {
     // An off-reference piece is one far run.
     let mut off = piece((0..5).map(|i| [i as f64, 0.0]).collect(), 1.0);
     off.on_reference = false;
-    let ch = join(&[off], 1.5, 0.06, 4).unwrap();
+    let ch = join(&[off], 1.5, 0.0, 0.06, 4).unwrap();
     assert_eq!(ch.runs.len(), 1);
     assert_eq!(ch.runs[0].offset, f64::INFINITY);
 }
 
 #[test]
 fn chain_rejects_empty_pieces_and_mismatched_stations() {
-    assert!(join(&[], 1.5, 0.06, 4).is_err());
+    assert!(join(&[], 1.5, 0.0, 0.06, 4).is_err());
     let mut p = piece(vec![[0.0, 0.0], [1.0, 0.0]], 1.0);
     p.station.pop();
     assert!(matches!(
-        join(&[p], 1.5, 0.06, 4),
+        join(&[p], 1.5, 0.0, 0.06, 4),
         Err(PolylineError::Count {
             got: 1,
             expected: 2,
@@ -297,5 +304,121 @@ fn chain_rejects_empty_pieces_and_mismatched_stations() {
         })
     ));
     let p = piece(vec![], 1.0);
-    assert!(join(&[p], 1.5, 0.06, 4).is_err());
+    assert!(join(&[p], 1.5, 0.0, 0.06, 4).is_err());
+}
+
+/// An L: along x from the origin to (20, 0), then up to (20, 20), 1 m apart.
+fn right_angle() -> Vec<Xy> {
+    let mut p: Vec<Xy> = (0..=20).map(|i| [i as f64, 0.0]).collect();
+    p.extend((1..=20).map(|i| [20.0, i as f64]));
+    p
+}
+
+fn peak_curvature(p: &[Xy]) -> f64 {
+    turns::curvatures(p)
+        .iter()
+        .fold(0.0, |m: f64, k| m.max(k.abs()))
+}
+
+#[test]
+fn curvature_of_a_circle_is_its_chord_angle_over_its_chord() {
+    // Chords of 2 R sin(dtheta / 2) turning by dtheta: k = dtheta / chord.
+    let (r, dth) = (10.0, 0.1_f64);
+    let k = turns::curvatures(&circle_arc(r, 20, dth));
+    let want = dth / (2.0 * r * (0.5 * dth).sin());
+    assert_eq!((k[0], k[19]), (0.0, 0.0));
+    assert!(k[1..19].iter().all(|&v| close(v, want, 1e-12)), "{k:?}");
+    // Clockwise: negative. Repeated points: 0.
+    let cw: Vec<Xy> = circle_arc(r, 5, -dth);
+    assert!(close(turns::curvatures(&cw)[2], -want, 1e-12));
+    assert_eq!(
+        turns::curvatures(&[[0.0, 0.0], [0.0, 0.0], [1.0, 0.0]])[1],
+        0.0
+    );
+}
+
+#[test]
+fn a_right_angle_is_rounded_to_the_radius_and_stays_symmetric() {
+    let sm = smooth(&right_angle(), 1.5);
+    let kmax = 0.25;
+    assert!(peak_curvature(&sm) > 2.0 * kmax, "{}", peak_curvature(&sm));
+    let (out, r) = turns::round_sharp_turns(&sm, 1.5, kmax);
+    assert_eq!(r.stretches.len(), 1, "{r:?}");
+    assert!(
+        r.peak_after[0] <= kmax && peak_curvature(&out) <= kmax,
+        "{r:?}"
+    );
+    assert_eq!(out.len(), sm.len());
+    // Far from the corner the track is where it was.
+    assert_eq!((out[0], out[40]), (sm[0], sm[40]));
+    // The L is its own mirror image across the line through (0, 20) and
+    // (20, 0) (x, y) -> (20 - y, 20 - x), point i onto point 40 - i; so is the rounding.
+    for i in 0..=40 {
+        let (p, q) = (out[i], out[40 - i]);
+        assert!(
+            close(p[0], 20.0 - q[1], 1e-9) && close(p[1], 20.0 - q[0], 1e-9),
+            "{i}: {p:?} {q:?}"
+        );
+    }
+    // The corner is cut: a circle of radius 1 / kmax tangent to both legs
+    // passes R (sqrt 2 - 1) from the corner, and a rounding no sharper
+    // cannot pass nearer.
+    let nearest = out
+        .iter()
+        .map(|p| distance(*p, [20.0, 0.0]))
+        .fold(f64::INFINITY, f64::min);
+    assert!(nearest >= (2.0_f64.sqrt() - 1.0) / kmax * 0.9, "{nearest}");
+}
+
+#[test]
+fn a_u_turn_too_tight_for_any_width_is_left_as_it_was() {
+    // Out along y = 0 and back along y = 1: no smoothing makes that R = 4
+    // (wider ones pull the legs together into a cusp, sharper still).
+    let mut p: Vec<Xy> = (0..=30).map(|i| [i as f64, 0.0]).collect();
+    p.extend((0..=30).rev().map(|i| [i as f64, 1.0]));
+    let sm = smooth(&p, 1.5);
+    let before = peak_curvature(&sm);
+    let (out, r) = turns::round_sharp_turns(&sm, 1.5, 0.25);
+    assert_eq!(r.stretches.len(), 1, "{r:?}");
+    assert_eq!(r.peak_after[0], before);
+    assert_eq!(out, sm);
+}
+
+#[test]
+fn rounding_is_off_without_a_positive_finite_limit_and_leaves_gentle_curves() {
+    let sm = smooth(&right_angle(), 1.5);
+    for k in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let (out, r) = turns::round_sharp_turns(&sm, 1.5, k);
+        assert_eq!(out, sm);
+        assert!(r.stretches.is_empty());
+    }
+    // An R = 10 m circle is within R = 4 m: untouched.
+    let arc = circle_arc(10.0, 60, 0.1);
+    let (out, r) = turns::round_sharp_turns(&arc, 1.5, 0.25);
+    assert_eq!(out, arc);
+    assert!(r.stretches.is_empty());
+    // Too few points: as given.
+    let few = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    assert_eq!(turns::round_sharp_turns(&few, 1.5, 0.25).0, few.to_vec());
+}
+
+#[test]
+fn join_reports_the_turns_it_rounded_and_the_runs_there_leave_the_lane() {
+    let l = right_angle();
+    let plain = join(&[piece(l.clone(), 1.0)], 1.5, 0.0, 0.06, 4).unwrap();
+    let ch = join(&[piece(l, 1.0)], 1.5, 0.25, 0.06, 4).unwrap();
+    assert!(plain.rounded.is_empty());
+    assert_eq!(ch.rounded.len(), 1);
+    let (a, b, k) = ch.rounded[0];
+    assert!(
+        a < b && a > 10.0 && b < ch.length - 10.0 && k <= 0.25,
+        "{:?} {}",
+        ch.rounded,
+        ch.length
+    );
+    // Cutting the corner shortens the track, and its runs off the lane are
+    // further off than the plain smoothing's.
+    assert!(ch.length < plain.length);
+    let far = |c: &chain::Chain| c.runs.iter().map(|r| r.offset).fold(0.0, f64::max);
+    assert!(far(&ch) > far(&plain) + 0.5, "{} {}", far(&ch), far(&plain));
 }

@@ -1,0 +1,134 @@
+//! Turns sharper than a vehicle can drive, rounded off.
+//!
+//! Road maps have kinks no car follows: a lane that overshoots its junction
+//! and comes back (Bologna's 58[0] -> 58[1] turns about 170 deg within
+//! 2.4 m), short lanes that meet at a sharp angle. A driver cuts them. After
+//! the Gaussian smoothing of the whole track ([`super::smooth`]), each
+//! stretch whose curvature is above `kappa_max` is smoothed again, alone,
+//! with wider Gaussians (two, three, four and six times the track's) until
+//! its curvature is within `kappa_max`, and the result is blended into the
+//! track with a smoothstep ramp on either side. A turn that no width within
+//! the widest rounds off (a U-turn between lanes closer than twice the
+//! radius) keeps its widest rounding, the one with the smallest peak
+//! curvature among those tried.
+
+use super::{smooth, smoothstep, Xy};
+
+/// The widths tried, in multiples of the track's own smoothing.
+const WIDTHS: [f64; 4] = [2.0, 3.0, 4.0, 6.0];
+
+/// Curvature (1/m, left positive) at each point: the turning angle between
+/// the segments before and after it over their mean length; 0 at the ends
+/// and where a segment has no length.
+pub fn curvatures(points: &[Xy]) -> Vec<f64> {
+    let n = points.len();
+    let mut k = vec![0.0; n];
+    for i in 1..n.saturating_sub(1) {
+        let (a, b, c) = (points[i - 1], points[i], points[i + 1]);
+        let (ux, uy) = (b[0] - a[0], b[1] - a[1]);
+        let (vx, vy) = (c[0] - b[0], c[1] - b[1]);
+        let (lu, lv) = (ux.hypot(uy), vx.hypot(vy));
+        if lu > 1e-9 && lv > 1e-9 {
+            let turn = (ux * vy - uy * vx).atan2(ux * vx + uy * vy);
+            k[i] = turn / (0.5 * (lu + lv));
+        }
+    }
+    k
+}
+
+fn peak(k: &[f64]) -> f64 {
+    k.iter().fold(0.0, |m: f64, v| m.max(v.abs()))
+}
+
+/// What [`round_sharp_turns`] did.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Rounding {
+    /// `[first, last]` point of each stretch that was smoothed again.
+    pub stretches: Vec<(usize, usize)>,
+    /// Peak |curvature| (1/m) left in each stretch (above `kappa_max` when
+    /// no width tried rounds it off).
+    pub peak_after: Vec<f64>,
+}
+
+/// Rounds off every stretch of `points` (a track already smoothed with a
+/// Gaussian of `sigma_pts` points) whose curvature is above `kappa_max`
+/// (see the module docs). Unchanged when `kappa_max` is not positive and
+/// finite, `sigma_pts` is not positive, or there are fewer than 5 points.
+pub fn round_sharp_turns(points: &[Xy], sigma_pts: f64, kappa_max: f64) -> (Vec<Xy>, Rounding) {
+    let mut pts = points.to_vec();
+    let mut done = Rounding::default();
+    let n = pts.len();
+    if !(kappa_max > 0.0 && kappa_max.is_finite() && sigma_pts > 0.0) || n < 5 {
+        return (pts, done);
+    }
+    let mut from = 1;
+    loop {
+        let k = curvatures(&pts);
+        let Some(a) = (from..n - 1).find(|&i| k[i].abs() > kappa_max) else {
+            break;
+        };
+        // The stretch: sharp points no further apart than the track's own
+        // smoothing window.
+        let gap = (3.0 * sigma_pts).ceil() as usize;
+        let mut b = a;
+        while let Some(next) = (b + 1..(b + 1 + gap).min(n - 1)).find(|&i| k[i].abs() > kappa_max) {
+            b = next;
+        }
+        let mut best: Option<(f64, Vec<Xy>, usize)> = None;
+        for w in WIDTHS {
+            let sigma = w * sigma_pts;
+            let core = (3.0 * sigma).ceil() as usize;
+            // The window reaches a full width past the blend, so that its own
+            // ends (held in place by the smoothing) get no weight.
+            let (lo, hi) = (a.saturating_sub(3 * core), (b + 3 * core).min(n - 1));
+            let wide = smooth(&pts[lo..=hi], sigma);
+            let mut cand = pts.clone();
+            for i in lo..=hi {
+                // 1 within `core` points of the stretch, smoothstep down to 0
+                // over the next `core` points.
+                let out = if i < a { a - i } else { i.saturating_sub(b) };
+                let wgt = if out <= core {
+                    1.0
+                } else if out >= 2 * core {
+                    0.0
+                } else {
+                    smoothstep(1.0 - (out - core) as f64 / core as f64)
+                };
+                let q = wide[i - lo];
+                cand[i] = [
+                    pts[i][0] + wgt * (q[0] - pts[i][0]),
+                    pts[i][1] + wgt * (q[1] - pts[i][1]),
+                ];
+            }
+            let left = peak(&curvatures(&cand[lo..=hi]));
+            let better = best.as_ref().map_or(true, |(p, _, _)| left < *p);
+            if better {
+                best = Some((left, cand, hi));
+            }
+            if left <= kappa_max {
+                break;
+            }
+        }
+        let (mut left, cand, hi) = best.expect("at least one width is tried");
+        // No width helps (smoothing the legs of a U-turn together makes a
+        // cusp): the turn stays as it was.
+        let before = peak(&k[a.saturating_sub(1)..=(b + 1).min(n - 1)]);
+        if left < before {
+            pts = cand;
+        } else {
+            left = before;
+        }
+        done.stretches.push((a, b));
+        done.peak_after.push(left);
+        // Past the stretch and its blend: a turn left sharp is not tried again.
+        from = if left <= kappa_max {
+            b + 1
+        } else {
+            hi.max(b + 1)
+        };
+        if from >= n - 1 {
+            break;
+        }
+    }
+    (pts, done)
+}
