@@ -343,7 +343,10 @@ mod tests {
         assert_eq!(out.moves, [Move::Xy, Move::Xy]);
         assert_eq!(out.xy_on_track, [true, false]);
         let sf = f.s_front(a).unwrap();
-        assert!((out.x_front_m[0] - sf).abs() < 1e-6 && out.y_front_m[0].abs() < 1e-9, "{out:?}");
+        assert!(
+            (out.x_front_m[0] - sf).abs() < 1e-6 && out.y_front_m[0].abs() < 1e-9,
+            "{out:?}"
+        );
         assert!((out.angle_deg[0] - 90.0).abs() < 1e-9);
         let s = f.state(b).unwrap();
         assert!((out.y_front_m[1] - s.y_m - 3.5 * s.theta_rad.sin()).abs() < 1e-9);

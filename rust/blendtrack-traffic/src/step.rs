@@ -328,7 +328,10 @@ impl RouteFleet {
         let (mut x_put, mut y_put, mut th_put) = (xf, yf, th);
         let mut on_track = false;
         if p.mv == Move::Xy {
-            let path = &self.fleet.track(self.fleet.vehicle_track(slot as i64)? as i64)?.path;
+            let path = &self
+                .fleet
+                .track(self.fleet.vehicle_track(slot as i64)? as i64)?
+                .path;
             let at = path.point_at(sf_new);
             if (at - Point2::new(xf, yf)).norm() > XY_ON_TRACK_M {
                 (x_put, y_put, th_put) = (at.x, at.y, path.heading_at(sf_new));
