@@ -94,6 +94,10 @@ class FakeVehicle:
         self.cars[vid]
         self.calls.append(("off", vid))
 
+    def changeLane(self, vid: str, index: int, duration: float) -> None:
+        self.cars[vid]
+        self.calls.append(("hold", vid, index, duration))
+
 
 class FakeConn:
     def __init__(self) -> None:
@@ -151,9 +155,12 @@ class FakeNet:
         return self.lanes[lane_id]
 
 
-def lane_changes(conn: FakeConn, plan_decel: float = 4.0, lanes: dict[str, FakeLane] | None = None) -> LaneChanges:
+def lane_changes(conn: FakeConn, plan_decel: float = 4.0, lanes: dict[str, FakeLane] | None = None,
+                 feeders: dict[str, tuple[tuple[str, float], ...]] | None = None) -> LaneChanges:
     net = FakeNet(lanes or {})
-    return LaneChanges(conn, SimpleNamespace(net=lambda: net), None, {}, plan_decel)  # type: ignore[arg-type]
+    feeds = feeders or {}
+    network = SimpleNamespace(net=lambda: net, feeders=lambda lane: feeds.get(lane, ()))
+    return LaneChanges(conn, network, None, {}, plan_decel)  # type: ignore[arg-type]
 
 
 # ------------------------------------------------------------ closed forms
@@ -1248,6 +1255,72 @@ def test_a_barely_started_lane_change_is_given_up_when_its_room_goes(monkeypatch
         assert aborted == (["me"] if gives_up else []), (gap, lat, index)
 
 
+def test_a_change_under_way_is_seen_by_the_nearest_vehicle_behind_on_each_lane_it_moves_onto() -> None:
+    """A change from lane 0 over lane 1 onto lane 2, the changer's front at
+    100 m (length 5: back at 95). On each of lanes 1 and 2 the nearest
+    vehicle whose front is behind 95 m, within 150 m, sees it: a controlled
+    one takes it as a soft leader at its gap (back less its front and
+    minGap: 95 - 80 - 2.5 = 12.5 m); behind one of SUMO's drivers, nobody
+    (the driver's follower follows the driver). Vehicles alongside or
+    ahead, and ones further back, are passed over; with nobody on lane 2,
+    one still on the junction lane before it (20 m long, front at 15 m:
+    5 m before the lane's start) is the nearest."""
+    from blendtrack.sumo.tracks import Active
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", pos=100.0, speed=3.0, lat=0.6, lane="e_0", lane_index=0)
+    for vid, pos in [("c1", 80.0), ("c0", 40.0), ("s1", 97.0), ("d2", 60.0), ("c2", 30.0), ("a2", 120.0), ("j", 15.0)]:
+        v.add(vid, pos=pos, speed=10.0)
+    conn.lanes = {"e_1": ["c0", "c1", "s1"], "e_2": ["c2", "d2", "a2"]}
+    lcs = lane_changes(conn, feeders={"e_2": ((":j_1", 20.0),)})
+    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0)  # type: ignore[arg-type]
+    lcs.active.update({"me": act, "c1": act, "c0": act, "c2": act})
+    index = {"me": 0, "c1": 1, "c0": 2, "c2": 4}
+    lcs.seen_coming(act, 0, 2)
+    assert lcs.soft_leaders(index) == [(1, "me", 95.0 - 80.0 - 2.5)]
+    assert lcs.counts["cut_in_steps"] == 1 and lcs._asked == {}
+    # Lane 2 empty but for one ahead: the controlled one on the junction
+    # lane before it, its gap counted from 5 m before the lane.
+    conn.lanes["e_2"] = ["a2"]
+    conn.lanes[":j_1"] = ["j"]
+    lcs.active["j"] = act
+    index["j"] = 3
+    lcs.seen_coming(act, 0, 2)
+    assert sorted(lcs.soft_leaders(index)) == [(1, "me", 12.5), (3, "me", 95.0 + 5.0 - 2.5)]
+    # Beyond 150 m behind the back: not seen. On the last lane: nothing to do.
+    v.cars["c1"]["pos"] = 95.0 - 150.0 - 1e-3
+    conn.lanes["e_1"] = ["c1"]
+    conn.lanes[":j_1"] = []
+    lcs.seen_coming(act, 0, 2)
+    assert not has_soft(lcs)
+    lcs.seen_coming(act, 2, 2)
+    assert not has_soft(lcs)
+
+
+def test_room_on_the_far_lane_counts_a_vehicle_still_in_the_junction_before_it() -> None:
+    """A change over two lanes from a standstill, front at 10 m (back 5),
+    10 m long: it lasts sqrt(20) s at 1 m/s^2, at a mean 10 / sqrt(20) m/s.
+    A vehicle at 13 m/s on the junction lane before the far lane (20 m
+    long, front at 10 m: 10 m before the far lane's start) is 5 + 10 - 2.5
+    = 12.5 m behind, where 5 + sqrt(20) (13 - 10 / sqrt(20)) = 53.1 m are
+    needed: no room. Without it the lane is clear."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", pos=10.0, speed=0.0)
+    v.add("j", pos=10.0, speed=13.0)
+    conn.lanes = {"e_2": [], ":j_1": ["j"]}
+    lcs = lane_changes(conn, feeders={"e_2": ((":j_1", 20.0),)})
+    assert not lcs.room_on_lane("me", "e_2", 10.0, 0.0, 10.0)
+    conn.lanes[":j_1"] = []
+    assert lcs.room_on_lane("me", "e_2", 10.0, 0.0, 10.0)
+    # Just far enough back: 53.1 m of gap.
+    need = 5.0 + math.sqrt(20.0) * (13.0 - 10.0 / math.sqrt(20.0))
+    conn.lanes[":j_1"] = ["j"]
+    lcs.network.feeders = lambda lane: ((":j_1", 20.0 + need - 12.5 + 1e-3),) if lane == "e_2" else ()  # type: ignore[attr-defined]
+    assert lcs.room_on_lane("me", "e_2", 10.0, 0.0, 10.0)
+
+
 def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(monkeypatch: pytest.MonkeyPatch) -> None:
     """A change the route needs, 0.8 m across (past giving up by its
     offset), SUMO still having the vehicle on the lane it leaves: a vehicle
@@ -1881,3 +1954,37 @@ def test_no_vehicle_is_moved_by_xy_off_the_network() -> None:
     # A wider vehicle reaches further before it is off the road; a change under way is no exception.
     assert keep(run, bus, "e", "e_1", 50.0, -2.6) == 3  # type: ignore[arg-type]
     assert keep(run, bus, "e", "e_1", 50.0, -2.8) == 1  # type: ignore[arg-type]
+
+
+def test_drivers_beyond_the_target_lane_are_held_while_a_change_goes_on() -> None:
+    """"me" (front 50 m, 5 m long) changes from e_0 onto e_1, the change
+    from 40 m over 20 m. SUMO's drivers on e_2 from 45 - 30 m to 60 + 30 m
+    are held on e_2 for FAR_SIDE_HOLD_S, whatever their lane-change model
+    wants now; those out of reach and controlled vehicles are left alone;
+    nothing before the change has a span."""
+    from blendtrack.sumo.tracks import Active
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="e_0", pos=50.0, speed=12.0, lane_index=0)
+    for vid, pos in [("w", 70.0), ("calm", 52.0), ("far", 60.0 + lc.JOIN_LOOK_M + 0.1), ("back", 45.0 - lc.JOIN_LOOK_M - 0.1),
+                     ("edge", 45.0 - lc.JOIN_LOOK_M + 0.1), ("ctl", 55.0)]:
+        v.add(vid, lane="e_2", pos=pos, speed=12.0)
+    conn.lanes = {"e_2": ["back", "edge", "calm", "ctl", "w", "far"]}
+    lcs = lane_changes(conn)
+    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0)  # type: ignore[arg-type]
+    lcs.active.update({"me": act, "ctl": act})
+    lcs.hold_far_side(act, "e_2", 45.0, 50.0)
+    assert v.calls == []  # no span yet: not under way
+    act.change_span = (40.0, 20.0)
+    lcs.hold_far_side(act, "e_2", 45.0, 50.0)
+    held = lc.FAR_SIDE_HOLD_S
+    assert v.calls == [("hold", "edge", 2, held), ("hold", "calm", 2, held), ("hold", "w", 2, held)]
+    assert lcs.counts["far_side_holds"] == 3
+    # Through seen_coming: the lane beyond e_1 seen from e_0 is e_2.
+    v.calls.clear()
+    lcs.seen_coming(act, 0, 1)
+    assert [c[1] for c in v.calls if c[0] == "hold"] == ["edge", "calm", "w"]
+    # No lane there (SUMO raises): nothing, no error.
+    conn.vehicles_on = lambda lane: (_ for _ in ()).throw(KeyError(lane))  # type: ignore[method-assign]
+    lcs.hold_far_side(act, "e_3", 45.0, 50.0)

@@ -62,6 +62,7 @@ class Network:
         self._link_indices: dict[str, dict[Any, int]] = {}
         self._fanouts: dict[str, tuple[tuple[str, ...], float]] | None = None
         self._into: dict[str, list[tuple[tuple[str, float], ...]]] | None = None
+        self._feeders: dict[str, tuple[tuple[str, float], ...]] = {}
         self._lengths: dict[str, float] = {}
         self._shapes: dict[str, tuple[np.ndarray, float]] = {}
         self._edge_lanes: dict[str, tuple[str, ...]] = {}
@@ -138,6 +139,32 @@ class Network:
                             into.setdefault(c.getToLane().getID(), []).append(chain)
             self._into = {k: v for k, v in into.items() if len(v) > 1}
         return self._into.get(lane, [])
+
+    def feeders(self, lane: str) -> tuple[tuple[str, float], ...]:
+        """The lanes that lead onto ``lane`` (a normal lane) through one
+        junction: its junction lanes and the normal lanes before them, each
+        with the distance (m) from its start to ``lane``'s start, so that a
+        position ``p`` on it is ``p - distance`` in ``lane``'s positions."""
+        hit = self._feeders.get(lane)
+        if hit is None:
+            net = self.net()
+            out: dict[str, float] = {}
+            try:
+                conns = net.getLane(lane).getIncomingConnections()
+            except (KeyError, AttributeError):
+                conns = []
+            for c in conns:
+                before = c.getFromLane()
+                if before.getID().startswith(":"):
+                    continue
+                chain = _via_chain(net, c)
+                dist = 0.0
+                for part in reversed(chain):
+                    dist += float(part.getLength())
+                    out.setdefault(part.getID(), dist)
+                out.setdefault(before.getID(), dist + float(before.getLength()))
+            hit = self._feeders[lane] = tuple(out.items())
+        return hit
 
     def lanes_into_merges(self) -> frozenset[str]:
         """The normal lanes with a connection onto a lane that several ways

@@ -281,6 +281,8 @@ class SumoRun:
             "waiting_point_waits": self.junctions.counts["waiting_point_waits"],
             "keep_clear_waits": self.junctions.counts["keep_clear_waits"],
             "courtesy_steps": lanes["courtesy_steps"],
+            "cut_in_steps": lanes["cut_in_steps"],
+            "far_side_holds": lanes["far_side_holds"],
             "gaps_opened": lanes["gaps_opened"],
             "merge_lead_steps": lanes["merge_lead_steps"],
             "tactical_lane_changes": lanes["tactical_lane_changes"],
