@@ -7,10 +7,11 @@
 //! stretch whose curvature is above `kappa_max` is smoothed again, alone,
 //! with wider Gaussians (two, three, four and six times the track's) until
 //! its curvature is within `kappa_max`, and the result is blended into the
-//! track with a smoothstep ramp on either side. A turn that no width within
-//! the widest rounds off (a U-turn between lanes closer than twice the
-//! radius) keeps its widest rounding, the one with the smallest peak
-//! curvature among those tried.
+//! track with a smoothstep ramp on either side. A turn that no width rounds
+//! off (a U-turn between lanes closer than twice the radius) keeps the
+//! rounding with the smallest peak curvature among those tried, or stays as
+//! it was when none is smoother (smoothing the legs of a U-turn together
+//! makes a cusp).
 
 use super::{smooth, smoothstep, Xy};
 
@@ -61,20 +62,21 @@ pub fn round_sharp_turns(points: &[Xy], sigma_pts: f64, kappa_max: f64) -> (Vec<
     if !(kappa_max > 0.0 && kappa_max.is_finite() && sigma_pts > 0.0) || n < 5 {
         return (pts, done);
     }
+    // A stretch: sharp points no further apart than the track's own
+    // smoothing window.
+    let gap = (3.0 * sigma_pts).ceil() as usize;
     let mut from = 1;
     loop {
         let k = curvatures(&pts);
         let Some(a) = (from..n - 1).find(|&i| k[i].abs() > kappa_max) else {
             break;
         };
-        // The stretch: sharp points no further apart than the track's own
-        // smoothing window.
-        let gap = (3.0 * sigma_pts).ceil() as usize;
         let mut b = a;
         while let Some(next) = (b + 1..(b + 1 + gap).min(n - 1)).find(|&i| k[i].abs() > kappa_max) {
             b = next;
         }
-        let mut best: Option<(f64, Vec<Xy>, usize)> = None;
+        // (peak curvature left, first point, the window's new points)
+        let mut best: Option<(f64, usize, Vec<Xy>)> = None;
         for w in WIDTHS {
             let sigma = w * sigma_pts;
             let core = (3.0 * sigma).ceil() as usize;
@@ -82,39 +84,36 @@ pub fn round_sharp_turns(points: &[Xy], sigma_pts: f64, kappa_max: f64) -> (Vec<
             // ends (held in place by the smoothing) get no weight.
             let (lo, hi) = (a.saturating_sub(3 * core), (b + 3 * core).min(n - 1));
             let wide = smooth(&pts[lo..=hi], sigma);
-            let mut cand = pts.clone();
-            for i in lo..=hi {
-                // 1 within `core` points of the stretch, smoothstep down to 0
-                // over the next `core` points.
-                let out = if i < a { a - i } else { i.saturating_sub(b) };
-                let wgt = if out <= core {
-                    1.0
-                } else if out >= 2 * core {
-                    0.0
-                } else {
-                    smoothstep(1.0 - (out - core) as f64 / core as f64)
-                };
-                let q = wide[i - lo];
-                cand[i] = [
-                    pts[i][0] + wgt * (q[0] - pts[i][0]),
-                    pts[i][1] + wgt * (q[1] - pts[i][1]),
-                ];
-            }
-            let left = peak(&curvatures(&cand[lo..=hi]));
-            let better = best.as_ref().map_or(true, |(p, _, _)| left < *p);
-            if better {
-                best = Some((left, cand, hi));
+            let cand: Vec<Xy> = (lo..=hi)
+                .map(|i| {
+                    // 1 within `core` points of the stretch, smoothstep down
+                    // to 0 over the next `core` points.
+                    let out = if i < a { a - i } else { i.saturating_sub(b) };
+                    let wgt = if out <= core {
+                        1.0
+                    } else if out >= 2 * core {
+                        0.0
+                    } else {
+                        smoothstep(1.0 - (out - core) as f64 / core as f64)
+                    };
+                    let (p, q) = (pts[i], wide[i - lo]);
+                    [p[0] + wgt * (q[0] - p[0]), p[1] + wgt * (q[1] - p[1])]
+                })
+                .collect();
+            let left = peak(&curvatures(&cand));
+            if best.as_ref().map_or(true, |(p, _, _)| left < *p) {
+                best = Some((left, lo, cand));
             }
             if left <= kappa_max {
                 break;
             }
         }
-        let (mut left, cand, hi) = best.expect("at least one width is tried");
-        // No width helps (smoothing the legs of a U-turn together makes a
-        // cusp): the turn stays as it was.
+        let (mut left, lo, cand) = best.expect("at least one width is tried");
+        let hi = lo + cand.len() - 1;
+        // No width helps: the turn stays as it was.
         let before = peak(&k[a.saturating_sub(1)..=(b + 1).min(n - 1)]);
         if left < before {
-            pts = cand;
+            pts[lo..=hi].copy_from_slice(&cand);
         } else {
             left = before;
         }
