@@ -1974,10 +1974,10 @@ def test_drivers_beyond_the_target_lane_are_held_while_a_change_goes_on() -> Non
     lcs = lane_changes(conn)
     act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0)  # type: ignore[arg-type]
     lcs.active.update({"me": act, "ctl": act})
-    lcs.hold_far_side(act, "e_2", 45.0, 50.0)
+    lcs.hold_far_side(act, "e", 2, 45.0, 50.0)
     assert v.calls == []  # no span yet: not under way
     act.change_span = (40.0, 20.0)
-    lcs.hold_far_side(act, "e_2", 45.0, 50.0)
+    lcs.hold_far_side(act, "e", 2, 45.0, 50.0)
     held = lc.FAR_SIDE_HOLD_S
     assert v.calls == [("hold", "edge", 2, held), ("hold", "calm", 2, held), ("hold", "w", 2, held)]
     assert lcs.counts["far_side_holds"] == 3
@@ -1987,4 +1987,4 @@ def test_drivers_beyond_the_target_lane_are_held_while_a_change_goes_on() -> Non
     assert [c[1] for c in v.calls if c[0] == "hold"] == ["edge", "calm", "w"]
     # No lane there (SUMO raises): nothing, no error.
     conn.vehicles_on = lambda lane: (_ for _ in ()).throw(KeyError(lane))  # type: ignore[method-assign]
-    lcs.hold_far_side(act, "e_3", 45.0, 50.0)
+    lcs.hold_far_side(act, "e", 3, 45.0, 50.0)

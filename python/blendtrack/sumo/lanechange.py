@@ -274,7 +274,7 @@ class LaneChanges:
         front = float(v.getLanePosition(act.vid))
         back = front - float(v.getLength(act.vid))
         step = 1 if target > index else -1
-        self.hold_far_side(act, f"{edge}_{target + step}", back, front)
+        self.hold_far_side(act, edge, target + step, back, front)
         for k in range(index + step, target + step, step):
             try:
                 behind = self.nearest_behind(f"{edge}_{k}", back - 1e-6)
@@ -289,8 +289,8 @@ class LaneChanges:
                 if old is None or gap < old[1]:
                     self._cut_ins[fid] = (act.vid, gap)
 
-    def hold_far_side(self, act: Active, far_lane: str, back: float, front: float) -> None:
-        """SUMO's drivers on ``far_lane``, beyond the target lane of ``act``'s
+    def hold_far_side(self, act: Active, edge: str, far: int, back: float, front: float) -> None:
+        """SUMO's drivers on lane ``far`` of ``edge``, beyond the target lane of ``act``'s
         change, level with it (from ``JOIN_LOOK_M`` behind its back to that
         far past the end of the change), are held on their lane for
         ``FAR_SIDE_HOLD_S`` (``changeLane`` to their own lane; renewed each
@@ -309,10 +309,9 @@ class LaneChanges:
         start, length = act.change_span
         lo, hi = back - JOIN_LOOK_M, max(front, start + length) + JOIN_LOOK_M
         try:
-            others = self.conn.vehicles_on(far_lane)
+            others = self.conn.vehicles_on(f"{edge}_{far}")
         except self.conn.errors:
             return
-        far = int(far_lane.rpartition("_")[2])
         for other in others:
             if other in self.active or not lo <= float(self.conn.get_lane_pos(other)) <= hi:
                 continue
