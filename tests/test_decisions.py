@@ -62,6 +62,19 @@ class FakeVehicle:
     def getDecel(self, vid: str) -> float:
         return self.cars[vid].get("decel", 4.5)
 
+    def getAllowedSpeed(self, vid: str) -> float:
+        return self.cars[vid].get("allowed", 30.0)
+
+    def getSpeedFactor(self, vid: str) -> float:
+        return self.cars[vid].get("speed_factor", 1.0)
+
+    def getTau(self, vid: str) -> float:
+        return self.cars[vid].get("tau", 1.0)
+
+    def setSpeed(self, vid: str, speed: float) -> None:
+        self.cars[vid]
+        self.calls.append(("speed", vid, speed))
+
     def getImpatience(self, vid: str) -> float:
         return self.cars[vid].get("impatience", 0.0)
 
@@ -1298,6 +1311,70 @@ def test_a_change_under_way_is_seen_by_the_nearest_vehicle_behind_on_each_lane_i
     assert not has_soft(lcs)
 
 
+def test_the_blind_speed_is_krauss_safe_speed_in_closed_form() -> None:
+    """v tau + v^2 / (2 b) = gap + v_l^2 / (2 b): at b = 4.5, tau = 1, a
+    leader at 10 m/s 20 m ahead, v = (-9 + sqrt(81 + 4 * 280)) / 2; with no
+    gap left, 0; a standing leader and no reaction time, sqrt(2 b gap)."""
+    v = lc.blind_speed(20.0, 10.0, 4.5, 1.0)
+    assert v == pytest.approx((-9.0 + math.sqrt(81.0 + 4.0 * 280.0)) / 2.0)
+    assert v * 1.0 + v * v / 9.0 == pytest.approx(20.0 + 100.0 / 9.0)
+    assert lc.blind_speed(0.0, 10.0, 4.5, 1.0) == 0.0
+    assert lc.blind_speed(-1.0, 30.0, 4.5, 1.0) == 0.0
+    assert lc.blind_speed(8.0, 0.0, 4.0, 0.0) == pytest.approx(8.0)
+    assert lc.blind_speed(math.nan, 10.0, 4.5, 1.0) == 0.0
+
+
+def test_a_sumo_driver_behind_a_change_it_cannot_see_yet_is_capped_for_one_step() -> None:
+    """"me" (front 100 m, back 95 m, 8 m/s) changes from e_0 onto e_1.
+    SUMO's driver "d" there, front at 80 m at 14 m/s: 12.5 m of gap after
+    its minGap, where Krauss's safe speed is -4.5 + sqrt(4.5^2 + 8^2 +
+    9 * 12.5) = 9.53 m/s, below the 16.6 m/s it could reach in the 1 s
+    step: it gets that speed for this step (and is counted once, however
+    many changers cap it; the tightest cap holds), and SUMO's own again at
+    the next step's start. One far enough back that the safe speed is out
+    of its reach is left alone, as is a driver that has left; the cap
+    never exceeds the driver's own top speed there (lane limit times speed
+    factor), which ``setSpeed`` would override."""
+    from blendtrack.sumo.tracks import Active
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="e_0", pos=100.0, speed=8.0, lane_index=0, lat=0.3)
+    v.add("d", lane="e_1", pos=80.0, speed=14.0)
+    conn.lanes = {"e_1": ["d"]}
+    lcs = lane_changes(conn)
+    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0)  # type: ignore[arg-type]
+    lcs.active["me"] = act
+    lcs.seen_coming(act, 0, 1)
+    cap = -4.5 + math.sqrt(4.5**2 + 8.0**2 + 9.0 * 12.5)
+    assert v.calls == [("speed", "d", pytest.approx(cap))]
+    lcs.cap_blind_follower("d", 30.0, 8.0)  # a looser cap: no call
+    lcs.cap_blind_follower("d", 5.0, 8.0)  # a tighter one: sent
+    assert v.calls[1:] == [("speed", "d", pytest.approx(lc.blind_speed(5.0, 8.0, 4.5, 1.0)))]
+    assert lcs.counts["blind_caps"] == 1
+    v.calls.clear()
+    lcs.release_caps()  # at the start of the next step (``make_due``)
+    assert v.calls == [("speed", "d", -1.0)]
+    v.calls.clear()
+    lcs.release_caps()
+    assert v.calls == []
+    # 60 m back at 14 m/s: safe speed 19.4 m/s, beyond 14 + 2.6.
+    v.cars["d"]["pos"] = 95.0 - 2.5 - 60.0
+    lcs.seen_coming(act, 0, 1)
+    assert lc.blind_speed(60.0, 8.0, 4.5, 1.0) > 16.6 and v.calls == []
+    # Under a lane limit of 8 m/s at speed factor 1.1, the cap is 8.8 m/s.
+    v.cars["d"]["pos"] = 80.0
+    v.cars["d"].update(allowed=8.0, speed_factor=1.1)
+    lcs.cap_blind_follower("d", 12.5, 8.0)
+    assert v.calls == [("speed", "d", pytest.approx(8.8))]
+    lcs.release_caps()
+    v.calls.clear()
+    del v.cars["d"]
+    conn.get_speed = lambda vid: v.cars[vid]["speed"]  # type: ignore[method-assign]
+    lcs.cap_blind_follower("d", 5.0, 8.0)
+    assert v.calls == [] and lcs.counts["blind_caps"] == 2
+
+
 def test_room_on_the_far_lane_counts_a_vehicle_still_in_the_junction_before_it() -> None:
     """A change over two lanes from a standstill, front at 10 m (back 5),
     10 m long: it lasts sqrt(20) s at 1 m/s^2, at a mean 10 / sqrt(20) m/s.
@@ -1327,7 +1404,11 @@ def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(
     that has come alongside on the target lane (a follower or a leader whose
     gap is below minus the minGap, 2.5 m: the bodies overlap) sends it back;
     one clear ahead or behind, or only within the minGap, does not, nor
-    does one alongside once SUMO has the vehicle on another lane."""
+    does one alongside once SUMO has the vehicle past the target lane. In a
+    change over two lanes, SUMO having the vehicle on the lane between, a
+    vehicle alongside on the next lane sends it back too (traced at Eccles,
+    seed 5, 479 s: a change from lane 0 to 3 crossed lane 1 into a vehicle
+    alongside on lane 2)."""
     from blendtrack.sumo.tracks import Active
 
     conn = FakeConn()
@@ -1353,6 +1434,14 @@ def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(
         v.neighbours = {("me", 0): followers, ("me", 2): leaders}
         lcs.changing_leader(act, None)
         assert aborted == (["me"] if goes_back else []), (followers, leaders, index)
+    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0)  # type: ignore[arg-type]
+    v.cars["me"]["lane"] = "e_1"
+    for followers, index, goes_back in [([("x", -3.3)], 1, True), ([("x", 4.0)], 1, False)]:
+        aborted.clear()
+        v.cars["me"]["lane_index"] = index
+        v.neighbours = {("me", 0): followers}
+        lcs.changing_leader(act, None)
+        assert aborted == (["me"] if goes_back else []), (followers, index)
 
 
 def test_a_leader_on_the_tracks_way_is_taken_when_sumo_has_the_vehicle_beside_it() -> None:

@@ -283,6 +283,7 @@ class SumoRun:
             "courtesy_steps": lanes["courtesy_steps"],
             "cut_in_steps": lanes["cut_in_steps"],
             "far_side_holds": lanes["far_side_holds"],
+            "blind_caps": lanes["blind_caps"],
             "gaps_opened": lanes["gaps_opened"],
             "merge_lead_steps": lanes["merge_lead_steps"],
             "tactical_lane_changes": lanes["tactical_lane_changes"],
