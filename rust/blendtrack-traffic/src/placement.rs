@@ -369,7 +369,7 @@ mod tests {
         assert!((out.angle_deg[0] - 90.0).abs() < 1e-9);
         let s = f.state(b).unwrap();
         assert!((out.y_front_m[1] - s.y_m - 3.5 * s.theta_rad.sin()).abs() < 1e-9);
-        assert!(crate::step::XY_ON_TRACK_M > 0.8 && crate::step::XY_ON_TRACK_M < 2.5);
+        const { assert!(crate::step::XY_ON_TRACK_M > 0.8 && crate::step::XY_ON_TRACK_M < 2.5) };
     }
 
     #[test]
