@@ -58,9 +58,7 @@
 //! its lanes in a step (SUMO with speed mode 0, Euler update) then needs no
 //! position at all, only the speed that makes up the distance from there to
 //! the front's new lane position (within `GLIDE_TOLERANCE_*` of the
-//! vehicle's own, which keeps the simulator's reported speed honest, or
-//! down to `1 - GLIDE_CATCH_UP_REL` of it while the simulator is more than
-//! `GLIDE_AHEAD_M` ahead); one
+//! vehicle's own, which keeps the simulator's reported speed honest); one
 //! that would need more is placed with [`Move::Lane`] at the new position
 //! minus `v dt` (before the simulator's movement), never behind where the
 //! simulator already has it, so a follower never sees its leader jump

@@ -35,19 +35,6 @@ pub(crate) const GLIDE_TOLERANCE_REL: f64 = 0.02;
 /// A simulator that has the front more than this (m) behind where a
 /// speed-only move can bring it is placed with a [`Move::Lane`].
 pub(crate) const GLIDE_BEHIND_M: f64 = 0.5;
-/// A simulator that a speed-only move at the lowest honest speed would
-/// leave more than this (m) ahead of the front's new place is sent slower,
-/// down to `1 - GLIDE_CATCH_UP_REL` of the vehicle's own speed (less the
-/// tolerance), until it is back within this: it is never moved back, and
-/// a simulator that moves a vehicle by its speed at the end of the step
-/// (Euler) runs ahead of one that accelerates within the step by half the
-/// speed gained times the step, 1.3 m a step of 1 s from a standstill at
-/// 2.6 m/s^2. Within the tolerance alone, stop-and-go at 1 s steps had it
-/// 4 m ahead; the next (x, y) move put it back those 4 m, within the
-/// follower's minGap (Eccles, seed 5, 594 s). Reporting a lower speed than
-/// the vehicle's errs on the safe side for its followers.
-pub(crate) const GLIDE_AHEAD_M: f64 = 0.5;
-pub(crate) const GLIDE_CATCH_UP_REL: f64 = 0.25;
 /// Below this change of the speed (m/s) no speed command is sent ([`Move::Hold`]):
 /// the simulator's speed then differs from the vehicle's by less than this,
 /// its position by less than this times dt (2 mm at 0.1 s), made up in the
@@ -245,8 +232,7 @@ fn crossing_lane_speed(route: &Route, k: usize, target: f64, s_old: f64, dt_s: f
 /// GLIDE_TOLERANCE_* of the vehicle's own speed in the simulator's lane
 /// coordinates (`expect`): a simulator a little off (ahead, or behind by up
 /// to GLIDE_BEHIND_M) is brought back over a few steps; it is never moved
-/// backwards, and one further ahead than GLIDE_AHEAD_M is sent slower
-/// still (GLIDE_CATCH_UP_REL). Nor is it carried over the end of its lane (`room` ahead of
+/// backwards. Nor is it carried over the end of its lane (`room` ahead of
 /// it) while the new place is still on that lane: a simulator ahead of
 /// blendtrack (a step of 1 s from a standstill, its Euler move against
 /// blendtrack's sub-steps) was carried 1 cm over a stop line where
@@ -268,12 +254,7 @@ fn glide_move(
     dt_s: f64,
 ) -> Move {
     let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect;
-    let mut lowest = (expect - tol).max(0.0);
-    if lowest * dt_s - dist > GLIDE_AHEAD_M {
-        let catch_up = (expect * (1.0 - GLIDE_CATCH_UP_REL) - tol).max(0.0);
-        lowest = ((dist + GLIDE_AHEAD_M) / dt_s).max(catch_up);
-    }
-    p.sumo_speed = (dist / dt_s).clamp(lowest, expect + tol);
+    p.sumo_speed = (dist / dt_s).clamp((expect - tol).max(0.0), expect + tol);
     if p.sumo_speed * dt_s > room - LANE_END_MARGIN_M {
         p.sumo_speed = ((room - LANE_END_MARGIN_M) / dt_s).max(0.0);
     }
@@ -645,50 +626,6 @@ mod tests {
                 "offset {offset}: made up after 40 steps, {err} left"
             );
         }
-    }
-
-    #[test]
-    fn a_simulator_far_ahead_is_sent_slower_until_it_is_back_within_reach() {
-        // The simulator has the front 3 m ahead of blendtrack's at 8 m/s:
-        // each step it is sent at no less than 3/4 of the vehicle's speed
-        // less the tolerance (or what leaves it GLIDE_AHEAD_M ahead), never
-        // backwards, the gap shrinking by at least 1/4 of the speed less the
-        // tolerance times dt while over GLIDE_AHEAD_M; then the honest
-        // tolerance brings it back as before.
-        let (mut f, a, mut sim) = settled_on_lane_10(40.0, 8.0);
-        sim.pos += 3.0;
-        let mut err = 3.0;
-        let mut steps_over = 0;
-        for k in 0..60 {
-            let before = sim.pos;
-            let out = sim_step(&mut f, a, &mut sim, true);
-            assert!(matches!(out.moves[0], Move::Speed | Move::Hold), "step {k}");
-            assert!(sim.pos >= before, "never backwards");
-            let v = out.v_mps[0];
-            let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * v;
-            let sent = out.sumo_speed_mps[0];
-            assert!(
-                sent <= v + tol + 1e-9 && sent >= v * (1.0 - GLIDE_CATCH_UP_REL) - tol - 1e-9,
-                "step {k}: {sent} at {v}"
-            );
-            let (_, want) = front_lane_pos(&f, a);
-            let now = sim.pos - want;
-            assert!(
-                now <= err + 1e-9 && now >= -1e-9,
-                "step {k}: {now} vs {err}"
-            );
-            if err > GLIDE_AHEAD_M + 0.3 {
-                steps_over += 1;
-                assert!(
-                    err - now >= (GLIDE_CATCH_UP_REL * v - 2.0 * tol) * DT - 1e-9,
-                    "step {k}: {err} -> {now}"
-                );
-            }
-            err = now;
-        }
-        // 2.5 m at 8 m/s: (0.25 * 8 - tol) m/s takes about 1.4 s.
-        assert!(steps_over <= 16, "{steps_over} steps over");
-        assert!(err.abs() < 1e-6, "made up after 60 steps, {err} left");
     }
 
     #[test]
