@@ -1322,6 +1322,10 @@ def test_the_blind_speed_is_krauss_safe_speed_in_closed_form() -> None:
     assert lc.blind_speed(-1.0, 30.0, 4.5, 1.0) == 0.0
     assert lc.blind_speed(8.0, 0.0, 4.0, 0.0) == pytest.approx(8.0)
     assert lc.blind_speed(math.nan, 10.0, 4.5, 1.0) == 0.0
+    # Not a number elsewhere: the floor (no reaction time, standing leader, 1e-3 m/s^2).
+    assert lc.blind_speed(8.0, 0.0, 4.0, math.nan) == pytest.approx(8.0)
+    assert lc.blind_speed(8.0, math.nan, 4.0, 0.0) == pytest.approx(8.0)
+    assert lc.blind_speed(8.0, 0.0, math.nan, 0.0) == pytest.approx(math.sqrt(2e-3 * 8.0))
 
 
 def test_a_sumo_driver_behind_a_change_it_cannot_see_yet_is_capped_for_one_step() -> None:

@@ -857,11 +857,15 @@ def blind_speed(gap: float, lead_speed: float, decel: float, tau: float) -> floa
     left out) at ``lead_speed`` m/s, both braking at ``decel`` m/s^2, with
     reaction time ``tau`` s: the speed v with v tau + v^2 / (2 b) =
     gap + lead_speed^2 / (2 b), i.e. -b tau + sqrt((b tau)^2 + v_l^2 + 2 b gap);
-    0 for a gap of 0 or less."""
-    b, t, vl = max(decel, 1e-3), max(tau, 0.0), max(lead_speed, 0.0)
-    room = vl * vl + 2.0 * b * gap
-    if not room > 0.0 or not gap > 0.0:
+    0 for a gap of 0 or less or not a number. A deceleration, reaction
+    time or leader speed that is not a number counts as its floor (1e-3,
+    0, 0): the result is always a number for ``setSpeed``."""
+    if not gap > 0.0:
         return 0.0
+    b = decel if decel > 1e-3 else 1e-3
+    t = tau if tau > 0.0 else 0.0
+    vl = lead_speed if lead_speed > 0.0 else 0.0
+    room = vl * vl + 2.0 * b * gap
     return max(-b * t + math.sqrt(b * b * t * t + room), 0.0)
 
 
