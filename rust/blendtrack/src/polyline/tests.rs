@@ -422,3 +422,91 @@ fn join_reports_the_turns_it_rounded_and_the_runs_there_leave_the_lane() {
     let far = |c: &chain::Chain| c.runs.iter().map(|r| r.offset).fold(0.0, f64::max);
     assert!(far(&ch) > far(&plain) + 0.5, "{} {}", far(&ch), far(&plain));
 }
+
+#[test]
+fn route_stations_run_on_across_pieces_at_their_scales() {
+    let a: Vec<Xy> = (0..=10).map(|i| [i as f64, 0.0]).collect();
+    let b: Vec<Xy> = (10..=20).map(|i| [i as f64, 0.0]).collect();
+    let c: Vec<Xy> = (21..=30).map(|i| [i as f64, 0.0]).collect();
+    let ch = join(
+        &[piece(a, 1.0), piece(b, 2.0), piece(c, 1.0)],
+        1.5,
+        0.0,
+        0.06,
+        4,
+    )
+    .unwrap();
+    // a: its own stations; b: on from a's end at twice the rate; c: on from
+    // b's end (30), the 1 m gap before it not counted. The line is straight,
+    // so each point's station is a function of its x.
+    let station_of = |x: f64| {
+        if x <= 10.0 {
+            x
+        } else if x <= 20.0 {
+            10.0 + 2.0 * (x - 10.0)
+        } else {
+            30.0 + (x - 21.0).max(0.0)
+        }
+    };
+    assert_eq!(ch.station.len(), ch.points.len());
+    for (k, (&got, p)) in ch.station.iter().zip(&ch.points).enumerate() {
+        let w = station_of(p[0]);
+        assert!(close(got, w, 1e-9), "point {k} at x {}: {got} vs {w}", p[0]);
+    }
+    assert!(close(ch.station[ch.station.len() - 1], 39.0, 1e-9));
+}
+
+#[test]
+fn route_stations_of_a_piece_that_goes_on_along_its_line_keep_its_origin() {
+    // A lane change's stretches: on lane a to 10 m, then on the lane beside
+    // (y = 1) from its position 11 m on, not sharing a point: its stations
+    // are lane positions of the same edge, so the route station is them.
+    let a: Vec<Xy> = (0..=10).map(|i| [i as f64, 0.0]).collect();
+    let b: Vec<Xy> = (11..=30).map(|i| [i as f64, 1.0]).collect();
+    let mut pb = piece(b, 1.0);
+    pb.station.iter_mut().for_each(|x| *x += 11.0);
+    let ch = join(&[piece(a, 1.0), pb], 1.5, 0.0, 0.06, 4).unwrap();
+    // Away from the step between the lanes (which the smoothing rounds
+    // over a few metres) each point's station is its x.
+    for (k, (&got, p)) in ch.station.iter().zip(&ch.points).enumerate() {
+        if (p[0] - 10.5).abs() > 4.0 {
+            assert!(close(got, p[0], 1e-6), "point {k} at x {}: {got}", p[0]);
+        }
+    }
+    assert!(ch.station.windows(2).all(|w| w[1] - w[0] < 1.5));
+}
+
+#[test]
+fn route_stations_jump_ahead_where_the_track_cuts_a_corner() {
+    // A right-angle corner rounded to a 4 m radius: the track cuts inside
+    // it, and the nearest point of the reference lines jumps past the corner.
+    let a: Vec<Xy> = (0..=30).map(|i| [i as f64, 0.0]).collect();
+    let b: Vec<Xy> = (0..=30).map(|i| [30.0, i as f64]).collect();
+    let ch = join(&[piece(a, 1.0), piece(b, 1.0)], 1.5, 0.25, 0.06, 4).unwrap();
+    let s = arc_lengths(&ch.points);
+    assert!(
+        ch.station.windows(2).all(|w| w[1] >= w[0]),
+        "non-decreasing"
+    );
+    assert!(close(ch.station[0], 0.0, 1e-9));
+    assert!(close(ch.station[ch.station.len() - 1], 60.0, 1e-9));
+    let shortcut = 60.0 - ch.length;
+    assert!(
+        shortcut > 0.5,
+        "the track is {shortcut} m shorter than the lanes"
+    );
+    // Away from the corner the station is the arc length (before it) or the
+    // arc length plus the shortcut (after it).
+    assert!(close(ch.station[10], s[10], 1e-6));
+    let last = s.len() - 10;
+    assert!(close(ch.station[last] - s[last], shortcut, 1e-6));
+    // Somewhere in the corner, one point to the next gains more station than
+    // arc length by a good part of the shortcut: a jump, not a smooth stretch.
+    let biggest = (1..s.len())
+        .map(|k| (ch.station[k] - ch.station[k - 1]) - (s[k] - s[k - 1]))
+        .fold(0.0, f64::max);
+    assert!(
+        biggest > 0.3 * shortcut,
+        "largest jump {biggest} of {shortcut}"
+    );
+}
