@@ -42,7 +42,12 @@
 //! the speed it was observed at (its gap grows by its speed times `h` and
 //! shrinks by the vehicle's own advance each control step), stop lines stay
 //! where they are (their gap shrinks by the vehicle's advance), the stop-line
-//! decisions and speed limits of the plan hold. Statistics take every control
+//! decisions and speed limits of the plan hold. A leader's gap is the
+//! simulator's, so the vehicle's advance it loses is the simulator's too: on
+//! a track with [`Stations`] the gain of the simulator's station, not the arc
+//! length, and the control law is given the arc length that uses the gap up
+//! ([`Route::arc_gap`]; where the track cuts a sharp corner the simulator has
+//! the vehicle jump ahead). Statistics take every control
 //! step (weighted by `h` where they are times or distances, one sample each
 //! in the means, so means are time-weighted). The move into the simulator is
 //! chosen once, from the final state. With `control_dt >= dt` (`n = 1`) a step
@@ -90,7 +95,7 @@ mod testkit;
 pub use error::TrafficError;
 pub use placement::Move;
 pub use plan::{can_stop, Observations, SoftLeaders};
-pub use route::{LaneChangeDue, Piece, Route, StopLine};
+pub use route::{LaneChangeDue, Piece, Route, Stations, StopLine};
 pub use signal::Signal;
 pub use stats::DriveStats;
 pub use step::RouteOutputs;

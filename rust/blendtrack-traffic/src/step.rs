@@ -8,7 +8,7 @@ use crate::plan::Plan;
 use crate::signal::{signal_at, Signal};
 use crate::substep::{
     advance, braking_mean_speed, control_record, held_speed, past_route_end, state_at,
-    stepped_finite, substeps, HeldGaps, LastStep,
+    stepped_finite, substeps, Front, HeldGaps, LastStep,
 };
 use crate::{Driven, RouteFleet, TrafficError};
 use blendtrack::path::wrap_angle;
@@ -135,11 +135,14 @@ impl RouteFleet {
         let n = substeps(dt_s, self.settings.control_dt_s);
         let last = if n == 1 {
             let states = self.planned_states(&plan);
-            let out = self.step_fleet(&plan, &states, HeldGaps::of_plan(&plan), dt_s)?;
+            let advance = vec![0.0; plan.slots.len()];
+            let fronts = self.fronts(&plan);
+            let gaps = HeldGaps::of_plan(&plan);
+            let out = self.step_fleet(&plan, &states, gaps, &fronts, &advance, dt_s)?;
             LastStep {
                 out,
                 before: states,
-                advance: vec![0.0; plan.slots.len()],
+                advance,
                 h: dt_s,
                 skip_past_end: false,
             }
@@ -190,15 +193,44 @@ impl RouteFleet {
 
     /// Stage 2: `states` (one per planned slot) and the plan's leaders, stop
     /// lines and limits (with the gaps of `gaps`) packed into the fleet's
-    /// inputs, stepped over `dt_s`.
+    /// inputs, stepped over `dt_s`. The leaders' and soft leaders' gaps are
+    /// the simulator's; each becomes the distance along the vehicle's track
+    /// that uses it up ([`crate::Route::arc_gap`]: less any jump of the
+    /// simulator's station in it), the front being `advance` (m, one per
+    /// planned slot) past where `fronts` has it.
     pub(crate) fn step_fleet(
         &mut self,
         plan: &Plan,
         states: &[VehicleState],
         gaps: HeldGaps<'_>,
+        fronts: &[Front],
+        advance: &[f64],
         dt_s: f64,
     ) -> Result<FleetOutputs, TrafficError> {
         let n = plan.slots.len();
+        let with_stations = fronts.iter().any(|f| f.route.stations.is_some());
+        let along = |g: &[f64]| -> Vec<f64> {
+            fronts
+                .iter()
+                .zip(advance)
+                .zip(g)
+                .map(|((f, a), &g)| f.route.arc_gap(f.s_m + a, g))
+                .collect()
+        };
+        let (leader, soft) = if with_stations {
+            (along(gaps.leader), along(gaps.soft))
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        let gaps = if with_stations {
+            HeldGaps {
+                leader: &leader,
+                soft: &soft,
+                ..gaps
+            }
+        } else {
+            gaps
+        };
         let mut cols: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
         for s in states {
             for (c, x) in cols

@@ -6,8 +6,9 @@
 
 use crate::plan::{Plan, NO_ENTRY};
 use crate::stats::StepRecord;
-use crate::{RouteFleet, TrafficError};
+use crate::{Route, RouteFleet, TrafficError};
 use blendtrack::{FleetOutputs, NextStates, VehicleState};
+use std::sync::Arc;
 
 /// A few parts per billion of `control_dt` are forgiven, so that a step of
 /// exactly `k control_dt` in floating point is `k` control steps, not `k + 1`.
@@ -197,6 +198,14 @@ pub(crate) struct LastStep {
     pub(crate) skip_past_end: bool,
 }
 
+/// A planned vehicle's route, where its front is on it at the plan (arc
+/// length) and the simulator's station there.
+pub(crate) struct Front {
+    pub(crate) route: Arc<Route>,
+    pub(crate) s_m: f64,
+    pub(crate) station_m: f64,
+}
+
 /// The front is past the end of its route at the start of a control step
 /// whose rear axle is at arc length `s_rear_m`: the simulator takes the
 /// vehicle out at its next step, and until then its controller tracks past
@@ -206,12 +215,31 @@ pub(crate) fn past_route_end(d: &crate::Driven, s_rear_m: f64) -> bool {
 }
 
 impl RouteFleet {
+    /// Each planned vehicle's [`Front`], in the plan's order.
+    pub(crate) fn fronts(&self, plan: &Plan) -> Vec<Front> {
+        plan.slots
+            .iter()
+            .map(|&slot| {
+                let d = self.driven[slot as usize]
+                    .as_ref()
+                    .expect("planned slots are driven");
+                Front {
+                    route: d.route.clone(),
+                    s_m: d.s_front_m,
+                    station_m: d.route.station_at(d.s_front_m),
+                }
+            })
+            .collect()
+    }
+
     /// Stage 2 at the control rate, `n` > 1 control steps of `dt_s / n`:
     /// every control step but the last is stepped and taken into the
     /// statistics; the last is stepped and returned. Leaders drive on at their
     /// observed speed, stop lines stay, so each gap at time `t` into the step
     /// is the plan's gap, plus the obstacle's speed times `t`, less the
-    /// vehicle's advance. The speed limits and stop-line decisions are the
+    /// vehicle's advance (a leader's and a soft leader's gap: less the gain
+    /// of the simulator's station, [`Route::station_at`], and a leader driven
+    /// here gains its own). The speed limits and stop-line decisions are the
     /// plan's. A vehicle whose state turns unusable stays so (NaN) to the
     /// last control step, which hands it back.
     pub(crate) fn control_steps(
@@ -242,15 +270,41 @@ impl RouteFleet {
                 }
             }
         }
+        let fronts = self.fronts(plan);
+        // How far the simulator will have the front of entry `i` moved.
+        let gain = |i: usize, moved: &[f64]| {
+            let f = &fronts[i];
+            if f.route.stations.is_some() {
+                f.route.station_at(f.s_m + moved[i]) - f.station_m
+            } else {
+                moved[i]
+            }
+        };
+        // Whose gain is needed: a vehicle with a leader or soft leader in
+        // view, and a leader driven here behind which one follows.
+        let mut needed: Vec<bool> = (0..m)
+            .map(|i| plan.leader_gap[i].is_finite() || plan.soft_gap[i].is_finite())
+            .collect();
+        for i in 0..m {
+            let j = plan.leader_entry[i];
+            if needed[i] && j != NO_ENTRY {
+                needed[j] = true;
+            }
+        }
+        let mut gained = vec![0.0; m];
         for k in 0..n {
             if k > 0 {
                 let t = k as f64 * h;
+                for (i, g) in gained.iter_mut().enumerate() {
+                    *g = if needed[i] { gain(i, &moved) } else { moved[i] };
+                }
                 for i in 0..m {
                     let j = plan.leader_entry[i];
+                    let moved_i = gained[i];
                     if lock_step && j != NO_ENTRY {
                         // A leader driven here: where its own control steps
                         // took it, at the speed they left it.
-                        leader[i] = plan.leader_gap[i] + moved[j] - moved[i];
+                        leader[i] = plan.leader_gap[i] + gained[j] - moved_i;
                         leader_speed[i] = held_speed(states[j].v_mps);
                     } else {
                         let v_adv = leader_advance_speed(
@@ -258,12 +312,12 @@ impl RouteFleet {
                             plan.leader_external[i],
                             dt_s,
                         );
-                        leader[i] = plan.leader_gap[i] + v_adv * t - moved[i];
+                        leader[i] = plan.leader_gap[i] + v_adv * t - moved_i;
                         if !tau[i].is_nan() {
                             reaction[i] = reaction_left(tau[i], t, h);
                         }
                     }
-                    soft[i] = plan.soft_gap[i] + held_speed(plan.soft_speed[i]) * t - moved[i];
+                    soft[i] = plan.soft_gap[i] + held_speed(plan.soft_speed[i]) * t - moved_i;
                     stop[i] = plan.stop_gap[i] - moved[i];
                 }
             }
@@ -274,7 +328,7 @@ impl RouteFleet {
                 stop: &stop,
                 soft: &soft,
             };
-            let out = self.step_fleet(plan, &states, gaps, h)?;
+            let out = self.step_fleet(plan, &states, gaps, &fronts, &moved, h)?;
             if k + 1 == n {
                 return Ok(LastStep {
                     out,
@@ -660,6 +714,81 @@ mod tests {
         );
         // The reported gap is still the leader's observed motion's.
         assert!((out.leader_gap_m[0] - (g0 - margin + 10.0 - moved)).abs() < 1e-9);
+    }
+
+    /// The jump of the simulator's station in [`jumping_at_100`] (m).
+    const JUMP_M: f64 = 7.0;
+
+    /// A track that cuts a corner between 100 and 101 m: the simulator's
+    /// station jumps [`JUMP_M`] ahead there (Bologna's 58[0] and junction 47
+    /// after it: 3.5 and 5.4 m, see `Stations`).
+    fn jumping_at_100() -> Stations {
+        let s: Vec<f64> = (0..=600).map(f64::from).collect();
+        let c: Vec<f64> = s
+            .iter()
+            .map(|&x| if x <= 100.0 { x } else { x + JUMP_M })
+            .collect();
+        Stations::new(s, c).unwrap()
+    }
+
+    /// Drives a vehicle from 40 m at 10 m/s up to a standing leader, 1 s
+    /// steps, in a simulator whose stations are [`jumping_at_100`]'s: the
+    /// leader's front is at arc length 103 m, past the jump, and the
+    /// simulator puts its back a length (4.5 m) behind the front's station,
+    /// so where the track has the back before the jump (SUMO measures a
+    /// vehicle it placed by (x, y) so). The gap is observed each step from
+    /// the station of the follower's front. The follower's route knows the
+    /// stations when `knows` is true. Returns the simulator's gap (minGap
+    /// left out) once the follower stands.
+    fn standing_gap_in_the_simulator(knows: bool) -> f64 {
+        let world = jumping_at_100();
+        let (path, route) = road(None, true);
+        let route = if knows {
+            route.with_stations(jumping_at_100())
+        } else {
+            route
+        };
+        let (mut f, t) = fleet_with((path, route), settings(H));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(40.0, 10.0), None)
+            .unwrap() as i64;
+        let leader_back = world.at(103.0) - 4.5;
+        let sim_gap =
+            |f: &RouteFleet| leader_back - world.at(f.s_front(a).unwrap()) - body().min_gap_m;
+        for _ in 0..40 {
+            let g = sim_gap(&f);
+            step_behind(&mut f, a, (g, 0.0), 1.0);
+        }
+        assert!(f.state(a).unwrap().v_mps.abs() < 1e-3, "stands");
+        sim_gap(&f)
+    }
+
+    #[test]
+    fn a_follower_stops_short_of_its_leader_in_the_simulator_s_stations_too() {
+        // Measured along the track alone, the follower runs over the jump
+        // and the simulator has it over its leader's back (within minGap:
+        // a collision by SUMO's rule; Bologna's 58[1], see `Stations`).
+        let blind = standing_gap_in_the_simulator(false);
+        assert!(blind < 0.0, "without stations, {blind} m in the simulator");
+        // Knowing the stations it stops before the jump, as far back in
+        // the simulator as on a road without one.
+        let seen = standing_gap_in_the_simulator(true);
+        let plain = {
+            let (path, route) = road(None, true);
+            let (mut f, t) = fleet_with((path, route), settings(H));
+            let a = f
+                .add_vehicle(t, None, None, body(), at(40.0, 10.0), None)
+                .unwrap() as i64;
+            for _ in 0..40 {
+                let g = 100.0 - f.s_front(a).unwrap() - body().min_gap_m;
+                step_behind(&mut f, a, (g, 0.0), 1.0);
+            }
+            100.0 - f.s_front(a).unwrap() - body().min_gap_m
+        };
+        assert!(
+            seen >= 0.0 && (seen - plain).abs() < 0.3,
+            "{seen} vs {plain}"
+        );
     }
 
     #[test]
