@@ -320,3 +320,63 @@ def test_a_kink_no_car_follows_is_rounded_to_the_turning_radius(tmp_path: Path, 
         starts = [g.piece_lane_pos[i] for i in at]
         assert starts == sorted(starts), (lane_id, starts)
         assert all(g.piece_scale[i] > 0 for i in at)
+
+
+def test_sumo_stations_jump_where_the_track_cuts_a_corner(tmp_path: Path, build_net: Any) -> None:
+    """A lane with a right-angle bend (100 m east, then 100 m north) and an
+    edge after it: the rounded track cuts inside the bend. Each track
+    point's station (``RouteGeometry.station``) is checked against sumolib's
+    own projection of the point onto the nearest of the route's lanes (the
+    lane SUMO's moveToXY puts it on), at that lane's offset along the route
+    and in SUMO's length units, made non-decreasing: within 0.1 m. Around
+    the bend the station jumps ahead of the arc length by about what the
+    track cuts off, and the table is accepted by RouteFleet (one station a
+    point of the Path), a wrong length rejected with a clear error."""
+    sumolib = pytest.importorskip("sumolib")
+    from blendtrack.sumo.geometry import route_geometry
+
+    net_file = build_net(
+        tmp_path,
+        '<nodes><node id="a" x="0" y="0"/><node id="b" x="100" y="100"/><node id="c" x="100" y="200"/></nodes>',
+        '<edges><edge id="ab" from="a" to="b" numLanes="1" shape="0,0 100,0 100,100"/>'
+        '<edge id="bc" from="b" to="c" numLanes="1"/></edges>',
+    )
+    net = sumolib.net.readNet(str(net_file), withInternal=True)
+    g = route_geometry(net, ["ab", "bc"], 0)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(g.points, axis=0).T))])
+    assert len(g.station) == len(g.points) and np.all(np.diff(g.station) >= 0.0)
+    # The route's lanes in order with their offsets (SUMO lengths).
+    lanes, offset = [], 0.0
+    for lane_id in dict.fromkeys(g.piece_lane):
+        lane = net.getLane(lane_id)
+        lanes.append((lane, offset))
+        offset += lane.getLength()
+    brute = []
+    for p in g.points:
+        best = min(
+            (lane.getClosestLanePosAndDist(tuple(p)) + (lane, off) for lane, off in lanes),
+            key=lambda r: r[1],
+        )
+        pos, _, lane, off = best
+        shape_len = float(ref_arc(np.asarray(lane.getShape(), dtype=float))[-1])
+        brute.append(off + pos * lane.getLength() / shape_len)
+    brute = np.maximum.accumulate(np.array(brute))
+    assert np.abs(g.station - brute).max() < 0.1, np.abs(g.station - brute).max()
+    # Before the bend the station is the arc length; past it, the arc length
+    # plus what the track cuts off; in between a jump of over a metre.
+    lead = g.station - s
+    assert abs(lead[s < 60.0]).max() < 0.05
+    cut = offset - g.length_m
+    assert cut > 1.0 and lead[-1] == pytest.approx(cut, abs=0.1)
+    assert np.diff(lead).max() > 1.0
+    fleet = blendtrack.RouteFleet()
+    path = blendtrack.Path(g.points, g.widths, closed=False)
+    kw = dict(
+        piece_start_m=g.piece_start_s, piece_scale=g.piece_scale, piece_offset_m=g.piece_offset,
+        piece_lane_length_m=g.piece_lane_length, piece_speed_mps=g.piece_speed, piece_lane=list(range(len(g.piece_lane))),
+        piece_edge=list(range(len(g.piece_lane))), piece_lane_index=g.piece_index, length_m=g.length_m,
+        piece_lane_pos_m=g.piece_lane_pos,
+    )
+    assert fleet.add_route(path, None, station_m=g.station, **kw) >= 0
+    with pytest.raises(blendtrack.InputError, match=r"route: \d+ stations for \d+ track points"):
+        fleet.add_route(path, None, station_m=g.station[:-1], **kw)

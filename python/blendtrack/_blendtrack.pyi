@@ -276,6 +276,7 @@ class RouteFleet:
         stop_check_inside: _ArrayLike | None = None,
         lane_change: tuple[int, int] | tuple[int, int, int] | None = None,
         piece_occurrence: _ArrayLike | None = None,
+        station_m: _ArrayLike | None = None,
     ) -> int: ...
     def add_vehicle(
         self,

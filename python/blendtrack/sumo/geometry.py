@@ -123,6 +123,13 @@ class RouteGeometry:
     pending_early: bool = False
     #: Total arc length (m).
     length_m: float = 0.0
+    #: SUMO's station at each point: the lane position SUMO gives a vehicle
+    #: whose front is there (``moveToXY`` maps it onto the nearest lane),
+    #: counted on from lane to lane along the route, non-decreasing. Where
+    #: the track cuts inside a sharp turn it jumps ahead of the arc length
+    #: (``blendtrack::polyline::chain``); ``RouteFleet`` uses it to keep the
+    #: gaps SUMO will measure. Empty: none (a station is the arc length).
+    station: np.ndarray = field(default_factory=lambda: np.zeros(0))
     #: What other modules derive from this geometry and the network alone,
     #: kept once found (``Junctions.leader_at_merge``: the merge ahead of
     #: each lane).
@@ -464,6 +471,17 @@ def _pieces(
     return out, early, early is not None
 
 
+def _chain_piece(pc: _Piece) -> tuple[np.ndarray, np.ndarray, bool, float]:
+    """A piece as ``polyline_join`` takes it: points, their positions along
+    the lane's shape, on the lane or not, SUMO's length per metre of shape.
+    A lane whose shape has no length (a junction lane netconvert leaves at
+    one point, 0.1 m long to SUMO) spans its SUMO length over its points,
+    so that the stations after it count it as SUMO does."""
+    if pc.shape_length_m < 1e-6:
+        return pc.shape, np.linspace(0.0, pc.length_m, len(pc.shape)), pc.on_lane, 1.0
+    return pc.shape, pc.lane_s, pc.on_lane, pc.length_m / pc.shape_length_m
+
+
 def _tag(pieces: list[_Piece], start: int, occurrence: int) -> None:
     """``pieces[start:]`` are of the route's edge ``occurrence``."""
     for pc in pieces[start:]:
@@ -514,7 +532,7 @@ def route_geometry(
     # SUMO as (lane, position): where a lane starts (its position 0) the
     # run starts at that point of the track.
     joined = polyline_join(
-        [(pc.shape, pc.lane_s, pc.on_lane, pc.length_m / pc.shape_length_m) for pc in pieces],
+        [_chain_piece(pc) for pc in pieces],
         smoothing_m / spacing_m,
         NEAR_LANE_M,
         MIN_RUN_PTS,
@@ -558,6 +576,7 @@ def route_geometry(
         piece_occurrence=[p.occurrence for p in pieces_of],
         piece_offset=joined["run_offset"],
         length_m=joined["length_m"],
+        station=joined["station"],
         pending_change=pending,
         pending_early=early,
         stops=stops,

@@ -173,6 +173,7 @@ class Tracks:
                     else None
                 ),
                 piece_occurrence=geo.piece_occurrence,
+                station_m=geo.station if len(geo.station) else None,
             )
             hit = (geo, track)
             if change is None:

@@ -179,6 +179,7 @@ pub fn polyline_join<'py>(
     d.set_item("run_station", col(|r| r.station))?;
     d.set_item("run_scale", col(|r| r.scale))?;
     d.set_item("run_offset", col(|r| r.offset))?;
+    d.set_item("station", PyArray1::from_vec(py, ch.station))?;
     d.set_item("rounded", ch.rounded)?;
     Ok(d)
 }

@@ -13,7 +13,8 @@ use crate::path::Path;
 use blendtrack::{StatValue, VehicleState};
 use blendtrack_traffic::{
     Body, DriveStats, LaneChangeDue, Move, Observations, Piece, Route,
-    RouteFleet as CoreRouteFleet, Signal, SoftLeaders, StopLine, TrafficError, TrafficSettings,
+    RouteFleet as CoreRouteFleet, Signal, SoftLeaders, Stations, StopLine, TrafficError,
+    TrafficSettings,
 };
 use numpy::ndarray::Array2;
 use numpy::{AllowTypeChange, IntoPyArray, PyArray1, PyArray2, PyArrayLike1};
@@ -160,7 +161,11 @@ impl RouteFleet {
     }
 
     /// Registers a track with its lane pieces and stop lines; returns its id.
-    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_offset_m, piece_lane_length_m, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, piece_lane_pos_m = None, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, stop_check_inside = None, lane_change = None, piece_occurrence = None))]
+    /// `station_m`: the simulator's station at each point of the path (see
+    /// `blendtrack_traffic::Stations`; `polyline_join`'s `station`), so that
+    /// gaps the simulator reports are used up where it will see them used
+    /// up; without it a station is the arc length.
+    #[pyo3(signature = (path, config, *, piece_start_m, piece_scale, piece_offset_m, piece_lane_length_m, piece_speed_mps, piece_lane, piece_edge, piece_lane_index, length_m, piece_lane_pos_m = None, stop_s_m = None, stop_light = None, stop_link = None, stop_major = None, stop_via = None, stop_exit_m = None, stop_check_inside = None, lane_change = None, piece_occurrence = None, station_m = None))]
     #[allow(clippy::too_many_arguments)]
     fn add_route(
         &mut self,
@@ -186,6 +191,7 @@ impl RouteFleet {
         stop_check_inside: Option<I64In<'_>>,
         lane_change: Option<Vec<i64>>,
         piece_occurrence: Option<I64In<'_>>,
+        station_m: Option<F64In<'_>>,
     ) -> PyResult<usize> {
         let starts = vec_of(&piece_start_m);
         let n = starts.len();
@@ -273,7 +279,13 @@ impl RouteFleet {
             });
         }
         let lane_change = lane_change.as_deref().map(lane_change_due).transpose()?;
-        let route = Route::new(pieces, stops, length_m, lane_change).map_err(traffic_error)?;
+        let mut route = Route::new(pieces, stops, length_m, lane_change).map_err(traffic_error)?;
+        if let Some(c) = station_m.as_ref().map(vec_of) {
+            // One station per point of the path, at the path's own arc lengths.
+            let stations =
+                Stations::new(path.inner.vertex_s().to_vec(), c).map_err(traffic_error)?;
+            route = route.with_stations(stations);
+        }
         let cfg = config.map(|c| c.to_core()).transpose()?.unwrap_or_default();
         let p = path.inner.clone();
         let inner = &mut self.inner;
