@@ -196,9 +196,6 @@ struct Driven {
     /// step, (lane, position): predicted from the last move, or read back by
     /// the bridge; None when unknown.
     known: Option<(u32, f64)>,
-    /// After a move by (x, y): how far (m of track) ahead of the front it
-    /// was put (see [`placement::xy_hold_ahead`]); None after any other move.
-    xy_ahead_m: Option<f64>,
     /// The speed last sent to the simulator (NaN before the first).
     sumo_speed: f64,
     /// Arc length where the caller wants the front to stop (a SUMO
@@ -393,7 +390,6 @@ impl RouteFleet {
             yellow: None,
             holding: None,
             known: None,
-            xy_ahead_m: None,
             sumo_speed: f64::NAN,
             halt_m: f64::NAN,
             lead_speed: f64::NAN,

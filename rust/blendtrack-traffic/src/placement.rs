@@ -47,10 +47,6 @@ pub(crate) const LANE_END_MARGIN_M: f64 = 1e-3;
 /// A speed-only move may carry the front over at most this many lane ends
 /// (short junction lanes at speed).
 pub(crate) const GLIDE_MAX_LANE_ENDS: usize = 3;
-/// A vehicle moved by (x, y) is put at most this far (m) ahead of its own
-/// front to keep the simulator from moving it back (see [`xy_hold_ahead`]);
-/// the SUMO bridge hands a vehicle back as a placement fault beyond 5 m.
-pub(crate) const XY_HOLD_AHEAD_MAX_M: f64 = 5.0;
 
 /// The distance the simulator must move the front, along its lanes, from
 /// where it has it (`known`: lane, position) to lane position `target` on
@@ -203,42 +199,6 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
         Move::Xy
     };
     p
-}
-
-/// How far along the track (m) to put a vehicle moved by (x, y) ahead of its
-/// new front at `sf_new` on piece `k`, so that the simulator does not move
-/// it back along its lanes from where it has it (`known`, the front's lane
-/// position before the simulator's movement): the simulator's Euler move
-/// runs ahead of blendtrack's control steps when a vehicle pulls away at a
-/// 1 s step (speed moves are never sent backwards, [`glide_move`]), and the
-/// next move by (x, y) put it back, into the minGap of the driver behind:
-/// Eccles, 30 %, seed 0 at 370 s (0.2 m, the driver behind pulling away)
-/// and seed 1 at 282 s (1.07 m, at the start of a lane change). Only where
-/// the simulator's lane is one of the route's on the same edge (a lane
-/// change's lanes side by side included), and up to
-/// [`XY_HOLD_AHEAD_MAX_M`]; 0 otherwise. The simulator then shows the
-/// vehicle where it was, and speed moves bring it back over a few steps.
-pub(crate) fn xy_hold_ahead(
-    route: &Route,
-    k: usize,
-    known: Option<(u32, f64)>,
-    sf_new: f64,
-) -> f64 {
-    let Some((lane, at)) = known else {
-        return 0.0;
-    };
-    let piece = &route.pieces[k];
-    let comparable = lane == piece.lane
-        || route
-            .pieces
-            .iter()
-            .any(|p| p.lane == lane && p.edge == piece.edge && p.occurrence == piece.occurrence);
-    let back = at - piece.lane_pos_at(sf_new);
-    if comparable && back > 0.0 && back <= XY_HOLD_AHEAD_MAX_M {
-        back / piece.scale
-    } else {
-        0.0
-    }
 }
 
 /// Whether the simulator has the vehicle on the lane of piece `k` with its
@@ -430,93 +390,6 @@ mod tests {
         let out = f.step(&[], DT).unwrap();
         assert_eq!(out.moves, [Move::Lane]);
         assert!((out.lane_pos_m[0] + out.v_mps[0] * DT - f.s_front(a).unwrap()).abs() < 1e-9);
-    }
-
-    #[test]
-    fn a_move_by_xy_never_puts_the_vehicle_back_behind_where_the_simulator_has_it() {
-        // A vehicle 0.5 m off the lane's centreline (moved by (x, y)); the
-        // simulator reports its front `ahead` m from blendtrack's on lane
-        // `lane`: the (x, y) given is the new front, put ahead along the
-        // heading as far as the simulator is ahead, within 5 m, on lane 10
-        // or a lane of its edge (none here but 10).
-        let put_ahead = |lane: i64, ahead: f64| {
-            let (mut f, t) = fleet_on(road(None, true));
-            let mut off = at(50.0, 1.0);
-            off.y_m = 0.5;
-            let a = f.add_vehicle(t, None, None, body(), off, None).unwrap() as i64;
-            let sf = f.s_front(a).unwrap();
-            plan_one(&mut f, a, (f64::NAN, f64::NAN), (lane, sf + ahead));
-            let out = f.step(&[], DT).unwrap();
-            assert_eq!(out.moves, [Move::Xy]);
-            let s = f.state(a).unwrap();
-            let front_x = s.x_m + 3.5 * s.theta_rad.cos();
-            (out.x_front_m[0] - front_x, f.s_front(a).unwrap() - sf)
-        };
-        // 1 m ahead: the vehicle moves about 0.1 m in the step, so it is
-        // put about 0.9 m ahead of its front, where the simulator has it.
-        let (shift, moved) = put_ahead(10, 1.0);
-        assert!(
-            moved > 0.05 && (shift - (1.0 - moved)).abs() < 1e-3,
-            "{shift} {moved}"
-        );
-        // Behind, beyond 5 m ahead (a fault, not a drift), on another edge:
-        // the front as it is.
-        for (lane, ahead) in [(10, -1.0), (10, 6.0), (12, 1.0)] {
-            let (shift, _) = put_ahead(lane, ahead);
-            assert!(shift.abs() < 1e-9, "lane {lane}, {ahead} m: {shift}");
-        }
-    }
-
-    #[test]
-    fn moved_by_xy_step_after_step_the_offset_ahead_only_shrinks_as_the_vehicle_advances() {
-        // Standing 0.5 m off the centreline behind a standing leader, the
-        // simulator first 1 m ahead; then each read-back a little further
-        // on (its lane mapping of the point put): the point put does not
-        // creep forward with it, nor go back.
-        let (mut f, t) = fleet_on(road(None, true));
-        let mut off = at(50.0, 0.0);
-        off.y_m = 0.5;
-        let a = f.add_vehicle(t, None, None, body(), off, None).unwrap() as i64;
-        let sf = f.s_front(a).unwrap();
-        let mut put = Vec::new();
-        for k in 0..5 {
-            let reported = sf + 1.0 + 0.3 * k as f64;
-            plan_one(&mut f, a, (0.5, 0.0), (10, reported));
-            let out = f.step(&[], DT).unwrap();
-            assert_eq!(out.moves, [Move::Xy]);
-            put.push(out.x_front_m[0]);
-        }
-        let front = f.state(a).unwrap().x_m + 3.5;
-        assert!(f.state(a).unwrap().v_mps.abs() < 1e-9, "stands");
-        for x in &put {
-            assert!(
-                (x - (front + 1.0)).abs() < 1e-6,
-                "{put:?} vs {}",
-                front + 1.0
-            );
-        }
-        // Driving off, the offset is worked off by at most the speed-move
-        // tolerance a step, and the point put never goes back.
-        let mut last = put[put.len() - 1];
-        let mut offsets = Vec::new();
-        for _ in 0..30 {
-            plan_one(&mut f, a, (f64::NAN, f64::NAN), (10, 0.0));
-            let out = f.step(&[], DT).unwrap();
-            if out.moves[0] != Move::Xy {
-                break;
-            }
-            let s = f.state(a).unwrap();
-            let front = s.x_m + 3.5 * s.theta_rad.cos();
-            assert!(out.x_front_m[0] >= last - 1e-6, "went back");
-            last = out.x_front_m[0];
-            offsets.push(out.x_front_m[0] - front);
-        }
-        assert!(offsets.len() > 3, "{offsets:?}");
-        for w in offsets.windows(2) {
-            let v = f.state(a).unwrap().v_mps.max(0.0);
-            assert!(w[1] <= w[0] + 1e-6, "{offsets:?}");
-            assert!(w[0] - w[1] <= (0.1 + 0.02 * v) * DT + 1e-3, "{offsets:?}");
-        }
     }
 
     #[test]

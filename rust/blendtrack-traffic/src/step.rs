@@ -3,9 +3,7 @@
 //! the statistics; results in [`RouteOutputs`].
 
 use crate::error::check_len;
-use crate::placement::{
-    choose_move, xy_hold_ahead, Motion, Move, GLIDE_TOLERANCE_MPS, GLIDE_TOLERANCE_REL,
-};
+use crate::placement::{choose_move, Motion, Move};
 use crate::plan::Plan;
 use crate::signal::{signal_at, Signal};
 use crate::substep::{
@@ -282,7 +280,6 @@ impl RouteFleet {
         let d = self.driven[slot]
             .as_mut()
             .expect("planned slots are driven");
-        let (known_before, s_before) = (d.known, d.s_front_m);
         let state = state_at(next, i);
         let finite = stepped_finite(&state, out.s_rear_m[i]);
         let (v, th) = (state.v_mps, state.theta_rad);
@@ -359,8 +356,7 @@ impl RouteFleet {
         // What the simulator is given for a move by (x, y): the front, or,
         // with the front further off the track than XY_ON_TRACK_M (a turn
         // tighter than the vehicle can drive), the track's point at the
-        // front's arc length, heading along the track; either one put ahead
-        // as far as keeps the simulator from moving it back (xy_hold_ahead).
+        // front's arc length, heading along the track.
         let (mut x_put, mut y_put, mut th_put) = (xf, yf, th);
         let mut on_track = false;
         if p.mv == Move::Xy {
@@ -368,31 +364,11 @@ impl RouteFleet {
                 .fleet
                 .track(self.fleet.vehicle_track(slot as i64)? as i64)?
                 .path;
-            // After a move by (x, y) the simulator's position was read back
-            // from where it was put, which its lane mapping may have a little
-            // off the track's: the offset goes on from there, worked off at
-            // most as fast as the vehicle advances and as a speed move would
-            // (GLIDE_TOLERANCE_*), so the simulator never moves it back.
-            let ahead = match d.xy_ahead_m {
-                Some(before) => {
-                    let catch_up = (GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * v.abs()) * dt_s;
-                    let advanced = (sf_new - s_before).max(0.0);
-                    (before - advanced.min(catch_up)).max(0.0)
-                }
-                None => xy_hold_ahead(&d.route, k, known_before, sf_new),
-            };
-            d.xy_ahead_m = Some(ahead);
             let at = path.point_at(sf_new);
             if (at - Point2::new(xf, yf)).norm() > XY_ON_TRACK_M {
-                let put = path.point_at(sf_new + ahead);
-                (x_put, y_put, th_put) = (put.x, put.y, path.heading_at(sf_new + ahead));
+                (x_put, y_put, th_put) = (at.x, at.y, path.heading_at(sf_new));
                 on_track = true;
-            } else if ahead > 0.0 {
-                (x_put, y_put) = (xf + ahead * th.cos(), yf + ahead * th.sin());
             }
-        }
-        if p.mv != Move::Xy {
-            d.xy_ahead_m = None;
         }
         r.x_front_m.push(x_put);
         r.y_front_m.push(y_put);
