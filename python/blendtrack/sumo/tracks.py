@@ -173,7 +173,13 @@ class Tracks:
                     else None
                 ),
                 piece_occurrence=geo.piece_occurrence,
-                station_m=geo.station if len(geo.station) else None,
+                # SUMO's stations only where a turn was rounded off (the
+                # track cuts inside it and SUMO's lane position jumps ahead;
+                # Bologna's 58[0]). Elsewhere they follow the arc length
+                # within centimetres a metre, and converting every gap with
+                # them cost Eccles (no rounded turn) arrivals and collisions
+                # (seeds 0-11: 0.491 -> 0.467 of plain's, 3 -> 14).
+                station_m=geo.station if geo.rounded and len(geo.station) else None,
             )
             hit = (geo, track)
             if change is None:
