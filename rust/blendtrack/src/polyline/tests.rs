@@ -269,6 +269,25 @@ fn chain_of_straight_pieces_shares_points_and_keeps_stations() {
         assert_eq!(run.station, 0.0);
         assert!(run.offset < 1e-12);
     }
+    // The route stations:
+    // a: its own stations; b: on from a's end at twice the rate; c: on from
+    // b's end (30), the 1 m gap before it not counted. The line is straight,
+    // so each point's station is a function of its x.
+    let station_of = |x: f64| {
+        if x <= 10.0 {
+            x
+        } else if x <= 20.0 {
+            10.0 + 2.0 * (x - 10.0)
+        } else {
+            30.0 + (x - 21.0).max(0.0)
+        }
+    };
+    assert_eq!(ch.station.len(), ch.points.len());
+    for (k, (&got, p)) in ch.station.iter().zip(&ch.points).enumerate() {
+        let w = station_of(p[0]);
+        assert!(close(got, w, 1e-9), "point {k} at x {}: {got} vs {w}", p[0]);
+    }
+    assert!(close(ch.station[ch.station.len() - 1], 39.0, 1e-9));
 }
 
 #[test]
@@ -421,39 +440,6 @@ fn join_reports_the_turns_it_rounded_and_the_runs_there_leave_the_lane() {
     assert!(ch.length < plain.length);
     let far = |c: &chain::Chain| c.runs.iter().map(|r| r.offset).fold(0.0, f64::max);
     assert!(far(&ch) > far(&plain) + 0.5, "{} {}", far(&ch), far(&plain));
-}
-
-#[test]
-fn route_stations_run_on_across_pieces_at_their_scales() {
-    let a: Vec<Xy> = (0..=10).map(|i| [i as f64, 0.0]).collect();
-    let b: Vec<Xy> = (10..=20).map(|i| [i as f64, 0.0]).collect();
-    let c: Vec<Xy> = (21..=30).map(|i| [i as f64, 0.0]).collect();
-    let ch = join(
-        &[piece(a, 1.0), piece(b, 2.0), piece(c, 1.0)],
-        1.5,
-        0.0,
-        0.06,
-        4,
-    )
-    .unwrap();
-    // a: its own stations; b: on from a's end at twice the rate; c: on from
-    // b's end (30), the 1 m gap before it not counted. The line is straight,
-    // so each point's station is a function of its x.
-    let station_of = |x: f64| {
-        if x <= 10.0 {
-            x
-        } else if x <= 20.0 {
-            10.0 + 2.0 * (x - 10.0)
-        } else {
-            30.0 + (x - 21.0).max(0.0)
-        }
-    };
-    assert_eq!(ch.station.len(), ch.points.len());
-    for (k, (&got, p)) in ch.station.iter().zip(&ch.points).enumerate() {
-        let w = station_of(p[0]);
-        assert!(close(got, w, 1e-9), "point {k} at x {}: {got} vs {w}", p[0]);
-    }
-    assert!(close(ch.station[ch.station.len() - 1], 39.0, 1e-9));
 }
 
 #[test]
