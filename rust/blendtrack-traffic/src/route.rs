@@ -134,34 +134,31 @@ impl Stations {
     /// The station of arc length `s`: linear between points, gaining 1 m
     /// per metre beyond either end.
     pub fn at(&self, s: f64) -> f64 {
-        let (xs, cs) = (&self.s, &self.c);
-        let k = xs.partition_point(|&x| x <= s);
-        if k == 0 {
-            return cs[0] + (s - xs[0]);
-        }
-        if k == xs.len() {
-            return cs[k - 1] + (s - xs[k - 1]);
-        }
-        let u = (s - xs[k - 1]) / (xs[k] - xs[k - 1]);
-        cs[k - 1] + u * (cs[k] - cs[k - 1])
+        lookup(&self.s, &self.c, s)
     }
 
     /// The largest arc length whose station is at most `c` (the inverse of
     /// [`Stations::at`]; the far end of a stretch the station stands still
     /// over).
     pub fn arc_at(&self, c: f64) -> f64 {
-        let (xs, cs) = (&self.s, &self.c);
-        let k = cs.partition_point(|&x| x <= c);
-        if k == 0 {
-            return xs[0] + (c - cs[0]);
-        }
-        if k == cs.len() {
-            return xs[k - 1] + (c - cs[k - 1]);
-        }
-        // cs[k - 1] <= c < cs[k]
-        let u = (c - cs[k - 1]) / (cs[k] - cs[k - 1]);
-        xs[k - 1] + u * (xs[k] - xs[k - 1])
+        lookup(&self.c, &self.s, c)
     }
+}
+
+/// `ys` at `x` along non-decreasing `xs`: linear between the last point at
+/// or before `x` and the next, 1 per 1 beyond either end (on a stretch of
+/// equal `xs`, its last point).
+fn lookup(xs: &[f64], ys: &[f64], x: f64) -> f64 {
+    let k = xs.partition_point(|&v| v <= x);
+    if k == 0 {
+        return ys[0] + (x - xs[0]);
+    }
+    if k == xs.len() {
+        return ys[k - 1] + (x - xs[k - 1]);
+    }
+    // xs[k - 1] <= x < xs[k]
+    let u = (x - xs[k - 1]) / (xs[k] - xs[k - 1]);
+    ys[k - 1] + u * (ys[k] - ys[k - 1])
 }
 
 /// A station table keeps only the points it needs for its stations

@@ -217,19 +217,14 @@ impl RouteFleet {
                 .map(|((f, a), &g)| f.route.arc_gap(f.s_m + a, g))
                 .collect()
         };
-        let (leader, soft) = if with_stations {
-            (along(gaps.leader), along(gaps.soft))
-        } else {
-            (Vec::new(), Vec::new())
-        };
-        let gaps = if with_stations {
-            HeldGaps {
-                leader: &leader,
-                soft: &soft,
+        let converted = with_stations.then(|| (along(gaps.leader), along(gaps.soft)));
+        let gaps = match &converted {
+            Some((leader, soft)) => HeldGaps {
+                leader,
+                soft,
                 ..gaps
-            }
-        } else {
-            gaps
+            },
+            None => gaps,
         };
         let mut cols: [Vec<f64>; 5] = std::array::from_fn(|_| Vec::with_capacity(n));
         for s in states {

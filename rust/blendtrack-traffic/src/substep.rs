@@ -280,23 +280,12 @@ impl RouteFleet {
                 moved[i]
             }
         };
-        // Whose gain is needed: a vehicle with a leader or soft leader in
-        // view, and a leader driven here behind which one follows.
-        let mut needed: Vec<bool> = (0..m)
-            .map(|i| plan.leader_gap[i].is_finite() || plan.soft_gap[i].is_finite())
-            .collect();
-        for i in 0..m {
-            let j = plan.leader_entry[i];
-            if needed[i] && j != NO_ENTRY {
-                needed[j] = true;
-            }
-        }
         let mut gained = vec![0.0; m];
         for k in 0..n {
             if k > 0 {
                 let t = k as f64 * h;
                 for (i, g) in gained.iter_mut().enumerate() {
-                    *g = if needed[i] { gain(i, &moved) } else { moved[i] };
+                    *g = gain(i, &moved);
                 }
                 for i in 0..m {
                     let j = plan.leader_entry[i];
