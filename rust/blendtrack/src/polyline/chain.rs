@@ -183,33 +183,63 @@ fn route_stations(pieces: &[ChainPiece], j: &Joined, points: &[Xy]) -> Vec<f64> 
     let n = j.raw.len();
     let mut out = Vec::with_capacity(points.len());
     let mut floor = f64::NEG_INFINITY;
+    let mut near = Vec::new();
     for (i, p) in points.iter().enumerate() {
         let (a, b) = (
             i.saturating_sub(STATION_WINDOW_PTS),
             (i + STATION_WINDOW_PTS).min(n - 1),
         );
-        let mut best = (f64::INFINITY, raw_c[i.min(n - 1)]);
-        if a == b {
-            best.0 = distance(*p, j.raw[a]);
-        }
-        for r in a..b {
-            let (q0, q1) = (j.raw[r], j.raw[r + 1]);
-            let (dx, dy) = (q1[0] - q0[0], q1[1] - q0[1]);
-            let len2 = dx * dx + dy * dy;
-            let t = if len2 > 0.0 {
-                (((p[0] - q0[0]) * dx + (p[1] - q0[1]) * dy) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let d = (p[0] - q0[0] - t * dx).hypot(p[1] - q0[1] - t * dy);
-            if d < best.0 {
-                best = (d, raw_c[r] + t * (raw_c[r + 1] - raw_c[r]));
-            }
-        }
-        floor = floor.max(best.1);
+        let best = nearest_station(*p, &j.raw[a..=b], &raw_c[a..=b], &mut near)
+            .unwrap_or(raw_c[i.min(n - 1)]);
+        floor = floor.max(best);
         out.push(floor);
     }
     out
+}
+
+/// The station of `p`'s foot on the nearest segment of `line` (`station`
+/// per point, interpolated along the segment); of segments equally near
+/// (a point on the bisector of a corner is as near to both sides) the
+/// first. None for fewer than two points or a NaN point. `scratch` is
+/// reused from call to call.
+///
+/// Nearest by `hypot` distance, but `hypot` (glibc's is slow: most of the
+/// join's time when every segment of the window took one) only where the
+/// squared distance is within rounding of the smallest: squares can
+/// differ in the last bit where the distances do not, and the other way,
+/// so the choice is the same as with `hypot` on every segment.
+pub fn nearest_station(
+    p: Xy,
+    line: &[Xy],
+    station: &[f64],
+    scratch: &mut Vec<(f64, f64, f64, f64)>,
+) -> Option<f64> {
+    scratch.clear();
+    let mut min_sq = f64::INFINITY;
+    for w in line.windows(2) {
+        let (q0, q1) = (w[0], w[1]);
+        let (dx, dy) = (q1[0] - q0[0], q1[1] - q0[1]);
+        let len2 = dx * dx + dy * dy;
+        let t = if len2 > 0.0 {
+            (((p[0] - q0[0]) * dx + (p[1] - q0[1]) * dy) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let (ex, ey) = (p[0] - q0[0] - t * dx, p[1] - q0[1] - t * dy);
+        let sq = ex * ex + ey * ey;
+        min_sq = min_sq.min(sq);
+        scratch.push((sq, ex, ey, t));
+    }
+    let mut best = (f64::INFINITY, None);
+    for (r, &(sq, ex, ey, t)) in scratch.iter().enumerate() {
+        if sq <= min_sq * (1.0 + 1e-9) {
+            let d = ex.hypot(ey);
+            if d < best.0 {
+                best = (d, Some(station[r] + t * (station[r + 1] - station[r])));
+            }
+        }
+    }
+    best.1
 }
 
 /// `[a, b)` ranges of equal `far`, in order, after any stretch of near

@@ -1,6 +1,6 @@
 //! Closed-form checks of the polyline geometry.
 
-use super::chain::{join, runs, ChainPiece};
+use super::chain::{self, join, runs, ChainPiece};
 use super::*;
 
 fn close(a: f64, b: f64, tol: f64) -> bool {
@@ -495,4 +495,94 @@ fn route_stations_jump_ahead_where_the_track_cuts_a_corner() {
         biggest > 0.3 * shortcut,
         "largest jump {biggest} of {shortcut}"
     );
+}
+
+/// `nearest_station` as written first: `hypot` on every segment, the
+/// first of the smallest kept.
+fn nearest_station_reference(p: Xy, line: &[Xy], station: &[f64]) -> Option<f64> {
+    let mut best = (f64::INFINITY, None);
+    for r in 0..line.len().saturating_sub(1) {
+        let (q0, q1) = (line[r], line[r + 1]);
+        let (dx, dy) = (q1[0] - q0[0], q1[1] - q0[1]);
+        let len2 = dx * dx + dy * dy;
+        let t = if len2 > 0.0 {
+            (((p[0] - q0[0]) * dx + (p[1] - q0[1]) * dy) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = (p[0] - q0[0] - t * dx).hypot(p[1] - q0[1] - t * dy);
+        if d < best.0 {
+            best = (d, Some(station[r] + t * (station[r + 1] - station[r])));
+        }
+    }
+    best.1
+}
+
+#[test]
+fn nearest_station_takes_the_first_of_two_equally_near_sides_of_a_corner() {
+    // A right angle at (0, 0); (-0.1, 0.1) is 0.1 m from both sides: the
+    // first side's foot (-0.1, 0) is at station 0.9, the second's (0, 0.1)
+    // at 1.1.
+    let line = [[-1.0, 0.0], [0.0, 0.0], [0.0, 1.0]];
+    let st = [0.0, 1.0, 2.0];
+    let mut scratch = Vec::new();
+    assert_eq!(
+        chain::nearest_station([-0.1, 0.1], &line, &st, &mut scratch),
+        Some(0.9)
+    );
+    // Nearer the second side: its foot.
+    let s = chain::nearest_station([-0.1, 0.2], &line, &st, &mut scratch).unwrap();
+    assert!(close(s, 1.2, 1e-12), "{s}");
+    // A corner of the 7 x 7 grid's tracks (a junction lane's points): the
+    // point is as near to both sides by `hypot`, but its squared distance
+    // to the second side is smaller in the last bit.
+    let line = [
+        [407.74887468762716, 255.2706751874237],
+        [406.9744373438136, 255.73533759371185],
+        [406.2, 256.2],
+        [405.73533759371185, 256.9744373438136],
+        [405.2706751874237, 257.74887468762716],
+    ];
+    let p = [406.39769536244256, 256.39769536244256];
+    let st = [0.0, 1.0, 2.0, 3.0, 4.0];
+    let s = chain::nearest_station(p, &line, &st, &mut scratch).unwrap();
+    assert!(close(s, 1.925, 1e-3), "{s}");
+    assert_eq!(Some(s), nearest_station_reference(p, &line, &st));
+    // Nothing to map onto: no segment, or a NaN point.
+    assert_eq!(
+        chain::nearest_station([0.0, 0.0], &line[..1], &st[..1], &mut scratch),
+        None
+    );
+    assert_eq!(
+        chain::nearest_station([f64::NAN, 0.0], &line, &st, &mut scratch),
+        None
+    );
+}
+
+proptest::proptest! {
+    /// The pruned search gives the bits of `hypot` on every segment,
+    /// ties at corners included (points on a 1 m grid near a zigzag whose
+    /// stations jump at a corner).
+    #[test]
+    fn nearest_station_is_the_full_hypot_search(
+        seed in proptest::collection::vec((-3.0f64..3.0, -3.0f64..3.0), 6..30),
+        px in -40i32..40, py in -40i32..40, on_grid in proptest::bool::ANY,
+    ) {
+        let line: Vec<Xy> = seed.iter().scan([0.0, 0.0], |at, &(dx, dy)| {
+            *at = [at[0] + dx.round() * 0.5, at[1] + dy.round() * 0.5];
+            Some(*at)
+        }).collect();
+        let mut st = arc_lengths(&line);
+        let k = st.len() / 2;
+        st[k..].iter_mut().for_each(|s| *s += 0.25);
+        let p = if on_grid {
+            [f64::from(px) * 0.25, f64::from(py) * 0.25]
+        } else {
+            [f64::from(px) * 0.1 + 0.013, f64::from(py) * 0.1 - 0.007]
+        };
+        let mut scratch = Vec::new();
+        let got = chain::nearest_station(p, &line, &st, &mut scratch);
+        let want = nearest_station_reference(p, &line, &st);
+        proptest::prop_assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits));
+    }
 }
