@@ -115,6 +115,22 @@ def test_vtypes_come_from_gzipped_route_and_additional_files_with_distributions(
     assert "mix" in vt.known() and "nope" not in vt.known()
 
 
+def test_declares_finds_text_in_gzipped_files_and_across_the_scan_s_chunks(tmp_path: Path) -> None:
+    from blendtrack.sumo.sumocfg import mentions
+
+    d = _scenario_folder(tmp_path, gz=True)
+    (d / "run.cfg").write_text(_config(_inputs(gz=True)))
+    sc = resolve_scenario(d)
+    assert sc.declares("blendtrack.controlled")  # in the gzipped route file's vType 'calm'
+    assert not sc.declares("blendtrack.alpha")
+    # The scan reads 1 MiB at a time: text across the boundary is found,
+    # text only split by it is not made up.
+    big = tmp_path / "big.xml"
+    big.write_bytes(b" " * ((1 << 20) - 5) + b"blendtrack." + b" " * 10)
+    assert mentions(big, b"blendtrack.") and not mentions(big, b"blendtrack.x")
+    assert mentions(tmp_path / "gone.xml", b"x")  # unreadable: the parse after it says why
+
+
 def test_the_run_configuration_keeps_every_output_out_of_the_scenario(tmp_path: Path) -> None:
     d = _scenario_folder(tmp_path, gz=True)
     elsewhere = tmp_path / "elsewhere"

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from blendtrack.sumo.sumocfg import ScenarioError, SumoConfig, is_config, iter_xml
+from blendtrack.sumo.sumocfg import ScenarioError, SumoConfig, is_config, iter_xml, mentions
 
 #: The repository's scenario folder (present in a source checkout).
 SCENARIO_ROOT = Path(__file__).resolve().parents[3] / "sumo_scenarios"
@@ -89,6 +89,15 @@ class Scenario:
                     out.types[el.get("id", "")] = params
         self.__dict__["_vtypes"] = out
         return out
+
+    def declares(self, text: str) -> bool:
+        """Do the route or additional files hold ``text`` anywhere (a scan,
+        no parse; kept per text)? Lets a check of vType parameters skip
+        parsing files that name none of them."""
+        seen: dict[str, bool] = self.__dict__.setdefault("_declares", {})
+        if text not in seen:
+            seen[text] = any(mentions(f, text.encode()) for f in [*self.route_files, *self.additional_files])
+        return seen[text]
 
     @property
     def controlled_type(self) -> str | None:

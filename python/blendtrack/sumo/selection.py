@@ -146,6 +146,10 @@ class Selection:
         error naming it and the closest key (a typo would be ignored)."""
         import difflib
 
+        if not self.conn.scenario.declares(PARAM_PREFIX):
+            # No file names a parameter of ours: nothing to check, and the
+            # route files (Bologna's: 1.7 MB) need no parse.
+            return
         declared = self.conn.scenario.vtypes().types.get(vtype, {})
         for name in declared:
             if not name.startswith(PARAM_PREFIX) or name == CONTROLLED_PARAM:
