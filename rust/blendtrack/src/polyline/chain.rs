@@ -217,15 +217,7 @@ pub fn nearest_station(
     scratch.clear();
     let mut min_sq = f64::INFINITY;
     for w in line.windows(2) {
-        let (q0, q1) = (w[0], w[1]);
-        let (dx, dy) = (q1[0] - q0[0], q1[1] - q0[1]);
-        let len2 = dx * dx + dy * dy;
-        let t = if len2 > 0.0 {
-            (((p[0] - q0[0]) * dx + (p[1] - q0[1]) * dy) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let (ex, ey) = (p[0] - q0[0] - t * dx, p[1] - q0[1] - t * dy);
+        let (t, ex, ey) = foot(p, w[0], w[1]);
         let sq = ex * ex + ey * ey;
         min_sq = min_sq.min(sq);
         scratch.push((sq, ex, ey, t));
@@ -240,6 +232,20 @@ pub fn nearest_station(
         }
     }
     best.1
+}
+
+/// The foot of `p` on the segment `q0`-`q1`: its parameter `t` in [0, 1]
+/// (0 for a segment of no length) and the offset from it to `p`.
+#[inline]
+pub(crate) fn foot(p: Xy, q0: Xy, q1: Xy) -> (f64, f64, f64) {
+    let (dx, dy) = (q1[0] - q0[0], q1[1] - q0[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p[0] - q0[0]) * dx + (p[1] - q0[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (t, p[0] - q0[0] - t * dx, p[1] - q0[1] - t * dy)
 }
 
 /// `[a, b)` ranges of equal `far`, in order, after any stretch of near

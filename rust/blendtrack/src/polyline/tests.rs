@@ -502,15 +502,8 @@ fn route_stations_jump_ahead_where_the_track_cuts_a_corner() {
 fn nearest_station_reference(p: Xy, line: &[Xy], station: &[f64]) -> Option<f64> {
     let mut best = (f64::INFINITY, None);
     for r in 0..line.len().saturating_sub(1) {
-        let (q0, q1) = (line[r], line[r + 1]);
-        let (dx, dy) = (q1[0] - q0[0], q1[1] - q0[1]);
-        let len2 = dx * dx + dy * dy;
-        let t = if len2 > 0.0 {
-            (((p[0] - q0[0]) * dx + (p[1] - q0[1]) * dy) / len2).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let d = (p[0] - q0[0] - t * dx).hypot(p[1] - q0[1] - t * dy);
+        let (t, ex, ey) = chain::foot(p, line[r], line[r + 1]);
+        let d = ex.hypot(ey);
         if d < best.0 {
             best = (d, Some(station[r] + t * (station[r + 1] - station[r])));
         }
