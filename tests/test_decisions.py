@@ -1836,7 +1836,8 @@ def test_a_controlled_foe_is_known_by_its_track_wherever_sumo_has_it() -> None:
     v.add("bus", lane="before_1", pos=10.0, speed=4.0, length=12.0)
     conn.lanes = {"maj_0": [], ":m_0_0": [], "before_1": ["bus"]}
     prohibitors = {":n_0_0": [(":m_0_0", "maj_0", 0.2, "", -1)]}
-    net = SimpleNamespace(prohibitors=lambda via: prohibitors.get(via, []), conflict=lambda via, foe: (5.0, 4.0))
+    net = SimpleNamespace(prohibitors=lambda via: prohibitors.get(via, []), conflict=lambda via, foe: (5.0, 4.0),
+                          edge_lanes=lambda edge: ("maj_0",), feeders=lambda lane: ())
     fronts = {0: 99.0, 1: 50.0}
     lines = {1: [(20.0, 1), (56.0, 0)]}  # slot: (stop line's arc length, its junction lane's id)
 
@@ -1873,6 +1874,61 @@ def test_a_controlled_foe_is_known_by_its_track_wherever_sumo_has_it() -> None:
     # A SUMO driver where the bus was is not seen (SUMO's own links report it).
     j.controlled = {"me": controlled["me"]}
     j.new_step()
+    assert not j.link_busy("me", 0, ":n_0_0", 100.0)
+
+
+def test_a_foe_beyond_a_short_lane_in_or_changing_onto_it_is_seen() -> None:
+    """Bologna's 20b in small: "me" turns right from the minor road into a
+    merge with the major way ":m_0_0" (the ways meet 5 m into ours, 9.86 m
+    into theirs), whose lane in, "maj_0", is 0.74 m long right after the
+    junction before it (":p_0_0" 7 m, then "up_0"; beside them ":p_0_1" and
+    "up_1", which lead to "maj_1"). "me", 8.4 m from its line at 6.42 m/s,
+    needs 3.7 s to cross. A SUMO driver at 12.4 m/s on "up_1" 8.8 m from
+    its end (16.9 m from the point less the clearance: 1.4 s) whose best
+    lane is to its right changes there: seen, though its lane-change state
+    says "stay". One on "up_0" counts when its next link leads onto
+    "maj_0"; none counts that is too far, or stays on its lane."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="min_0", pos=91.6, speed=6.42)
+    v.add("t", lane="up_1", pos=27.8, speed=12.4, best=[("up_0", 30.0, 0.0, 0), ("up_1", 30.0, 0.0, -1)])
+    v.getBestLanes = lambda vid: [(*b, True, []) for b in v.cars[vid]["best"]]  # type: ignore[attr-defined]
+    stay = tc.LCA_STAY | tc.LCA_COOPERATIVE
+    conn.lane_change_state = lambda vid, d: (stay, stay)  # type: ignore[attr-defined]
+    conn.lanes = {"maj_0": [], ":m_0_0": [], "up_1": ["t"]}
+    prohibitors = {":n_0_0": [(":m_0_0", "maj_0", 0.74, "", -1)]}
+    feeders = {"maj_0": ((":p_0_0", 7.02), ("up_0", 36.58)), "maj_1": ((":p_0_1", 7.02), ("up_1", 36.58))}
+    net = SimpleNamespace(prohibitors=lambda via: prohibitors.get(via, []), conflict=lambda via, foe: (5.0, 9.86),
+                          edge_lanes=lambda edge: ("maj_0", "maj_1") if edge == "maj" else (),
+                          feeders=lambda lane: feeders.get(lane, ()), lane_length=lambda lane: 0.74)
+    fleet = SimpleNamespace(s_front=lambda slot: 91.6, stops_ahead=lambda slots, m: (np.zeros(0, np.int64),) * 3)
+    j = Junctions(conn, net, SimpleNamespace(lanes=SimpleNamespace(names=[])), fleet, 4.0,  # type: ignore[arg-type]
+                  controlled={"me": SimpleNamespace(slot=0)})
+    assert j.link_busy("me", 0, ":n_0_0", 100.0), "its best lane is to its right"
+    v.cars["t"]["best"] = [("up_0", 30.0, 0.0, 1), ("up_1", 30.0, 0.0, 0)]
+    j.new_step()
+    assert not j.link_busy("me", 0, ":n_0_0", 100.0), "it stays on its lane"
+    conn.lane_change_state = lambda vid, d: (tc.LCA_RIGHT | tc.LCA_STRATEGIC, 0)  # type: ignore[attr-defined]
+    assert j.link_busy("me", 0, ":n_0_0", 100.0), "SUMO says it wants to change right"
+    v.cars["t"]["speed"] = 8.0  # (36.58 - 27.8 + 8.1) / 8 = 2.1 s: still first
+    assert j.link_busy("me", 0, ":n_0_0", 100.0)
+    v.cars["t"].update(pos=0.0)  # 44.7 m at 8 m/s: 5.6 s, after "me" has crossed
+    assert not j.link_busy("me", 0, ":n_0_0", 100.0)
+    # On the lane before "maj_0" itself: a foe if its next link leads there.
+    v.cars["t"].update(lane="up_0", pos=27.8, speed=12.4)
+    conn.lanes = {"maj_0": [], ":m_0_0": [], "up_0": ["t"]}
+    v.links["t"] = [("maj_0", True, True, False, ":p_0_0", "M", "s", 7.02)]
+    assert j.link_busy("me", 0, ":n_0_0", 100.0)
+    v.links["t"] = [("side_0", True, True, False, ":p_1_0", "M", "r", 7.02)]
+    assert not j.link_busy("me", 0, ":n_0_0", 100.0), "it turns away before the short lane"
+    # Inside the junction before, on the way onto "maj_0": a foe.
+    conn.lanes = {"maj_0": [], ":m_0_0": [], ":p_0_0": ["t"]}
+    v.cars["t"].update(lane=":p_0_0", pos=5.0)
+    assert j.link_busy("me", 0, ":n_0_0", 100.0)
+    # A long lane in is all that is looked along (the foe there is seen on it).
+    net.lane_length = lambda lane: 80.0
+    prohibitors[":n_0_0"] = [(":m_0_0", "maj_0", 80.0, "", -1)]
+    j._prohibitors.clear()
     assert not j.link_busy("me", 0, ":n_0_0", 100.0)
 
 

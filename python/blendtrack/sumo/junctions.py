@@ -42,6 +42,14 @@ CROSS_MARGIN_S = 1.0
 #: Room (m) between a vehicle crossing a foe's way and the foe at the point
 #: where the ways cross: about half a lane's width plus a margin.
 CONFLICT_CLEAR_M = 2.5
+#: A foe lane into a junction shorter than this (m) is not all a vehicle
+#: at a link without priority looks along: foes on the lanes before it,
+#: through the junction before, are looked for too (``Network.feeders``).
+#: Bologna's junction 20b: the major road comes in on 77ab, 0.74 m long,
+#: right after another junction; a foe at 12.4 m/s on the lane before it,
+#: 2 m from its end, was not seen, and a controlled car turning right from
+#: 56b went into the merge and met it (seeds 4, 10, 21 and 26).
+FEEDER_LANE_M = 30.0
 #: How far ahead along their tracks controlled vehicles are looked for as
 #: foes approaching a link (``Junctions.approaching_on_tracks``).
 APPROACH_LOOK_M = 100.0
@@ -890,6 +898,8 @@ class Junctions:
             for other in vehicles_on(incoming):
                 if other != vid and first(other, lane_length - float(get_pos(other)) + theirs - CONFLICT_CLEAR_M, t_cross):
                     return True
+            if lane_length < FEEDER_LANE_M and self._foe_before(vid, incoming, lane_length + theirs - CONFLICT_CLEAR_M, first, t_cross):
+                return True
             # A controlled foe SUMO has on another lane than its track's is
             # known by its track: a 12 m bus swung out of an S bend stood on
             # lane 1 to SUMO while its way went through lane 0's link, and
@@ -900,6 +910,64 @@ class Junctions:
                         and first(other, to_line + theirs - CONFLICT_CLEAR_M, t_cross):
                     return True
         return False
+
+    def _foe_before(self, vid: str, incoming: str, beyond: float, first: Any, t_cross: float) -> bool:
+        """Is a foe on its way onto the short lane ``incoming`` from beyond
+        the junction before it (``Network.feeders``), or about to change
+        onto it from a lane beside it (or from before that lane), first at
+        the crossing point (``first(other, distance, t_cross)``), ``beyond``
+        (m) past ``incoming``'s start? One on a normal lane before
+        ``incoming`` counts only when its next link leads onto it (it may
+        turn elsewhere); one on or before a lane beside it only when SUMO
+        says its driver wants to change toward it (Bologna's 20b: drivers
+        from 77[1][0]'s lane 1 change onto 77ab's lane 0, 0.74 m long, and
+        so onto the merge a car turning right from 56b takes)."""
+        vehicles_on, get_pos = self.conn.vehicles_on, self.conn.get_lane_pos
+        lanes = self.network.edge_lanes(edge_of(incoming))
+        mine = lanes.index(incoming) if incoming in lanes else -1
+        for k, lane in enumerate(lanes):
+            if k != mine and mine >= 0:
+                # Beside it: as near as on ``incoming`` itself, if it changes.
+                ways = ((lane, 0.0),) + self.network.feeders(lane)
+            else:
+                ways = self.network.feeders(incoming)
+            toward = 0 if k == mine else (1 if k < mine else -1)
+            for feeder, back in ways:
+                for other in vehicles_on(feeder):
+                    if other == vid or not first(other, back - float(get_pos(other)) + beyond, t_cross):
+                        continue
+                    if toward:
+                        if self._wants_toward(other, toward):
+                            return True
+                        continue
+                    if feeder.startswith(":"):
+                        return True
+                    try:
+                        links = self.conn.sumo.vehicle.getNextLinks(other)
+                    except self.conn.errors:
+                        continue
+                    if links and links[0][0] == incoming:
+                        return True
+        return False
+
+    def _wants_toward(self, other: str, toward: int) -> bool:
+        """Does SUMO's driver ``other`` want to change lanes toward
+        ``toward`` (1 left, -1 right): its lane-change state says so, or its
+        lane is not among its best lanes and the best are that way (at
+        Bologna's 20b a driver whose best lane was to its right said "stay"
+        a second before it changed there)?"""
+        tc = self.conn.tc
+        try:
+            state, _ = self.conn.lane_change_state(other, toward)
+            if state & (tc.LCA_LEFT if toward > 0 else tc.LCA_RIGHT):
+                return True
+            lane = self.conn.get_lane_id(other)
+            best = self.conn.sumo.vehicle.getBestLanes(other)
+        except self.conn.errors:
+            return False
+        # (lane, length, occupation, offset to the best lane, continues, next lanes)
+        offset = next((int(b[3]) for b in best if b[0] == lane), 0)
+        return offset != 0 and (offset > 0) == (toward > 0)
 
     def _off_its_lane(self, vid: str) -> bool:
         """Does SUMO have the controlled vehicle ``vid`` on another lane than
