@@ -263,6 +263,15 @@ def test_an_output_folder_of_a_batch_is_not_reused_by_accident(local_batch: tupl
     assert (out / "summary.md").is_file()
 
 
+def test_a_run_s_process_gets_one_blas_thread_unless_told_otherwise() -> None:
+    from blendtrack.batch.executor import child_env
+
+    env = child_env({"PATH": "/bin", "MPLBACKEND": "TkAgg"})
+    assert env["OPENBLAS_NUM_THREADS"] == "1" and env["PATH"] == "/bin"
+    assert env["MPLBACKEND"] == "Agg" and env["PYTHONUNBUFFERED"] == "1"
+    assert child_env({"OPENBLAS_NUM_THREADS": "4"})["OPENBLAS_NUM_THREADS"] == "4"
+
+
 def test_bad_sweep_on_the_command_line_is_one_line_and_exit_2(tmp_path: Path) -> None:
     file = _sweep(tmp_path, 'kind = "sim"\nscenarios = ["test_track"]\n[grid]\nalpha = []\n')
     r = _cli("batch", str(file), "--out", str(tmp_path / "o"))
