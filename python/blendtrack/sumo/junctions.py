@@ -924,14 +924,14 @@ class Junctions:
         so onto the merge a car turning right from 56b takes)."""
         vehicles_on, get_pos = self.conn.vehicles_on, self.conn.get_lane_pos
         lanes = self.network.edge_lanes(edge_of(incoming))
-        mine = lanes.index(incoming) if incoming in lanes else -1
+        if incoming not in lanes:
+            lanes = (incoming,)
+        mine = lanes.index(incoming)
         for k, lane in enumerate(lanes):
-            if k != mine and mine >= 0:
-                # Beside it: as near as on ``incoming`` itself, if it changes.
-                ways = ((lane, 0.0),) + self.network.feeders(lane)
-            else:
-                ways = self.network.feeders(incoming)
-            toward = 0 if k == mine else (1 if k < mine else -1)
+            # Lanes are right to left: a driver to the right changes left (1).
+            toward = (k < mine) - (k > mine)
+            # Beside it: as near as on ``incoming`` itself, if it changes.
+            ways = ((lane, 0.0),) + self.network.feeders(lane) if toward else self.network.feeders(incoming)
             for feeder, back in ways:
                 for other in vehicles_on(feeder):
                     if other == vid or not first(other, back - float(get_pos(other)) + beyond, t_cross):

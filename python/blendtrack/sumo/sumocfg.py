@@ -103,11 +103,11 @@ def mentions(file: Path, needle: bytes) -> bool:
         with _open(file) as stream:
             tail = b""
             while chunk := stream.read(1 << 20):
-                if needle in tail + chunk[: keep]:
+                # The end of the chunk before, for a needle across the boundary.
+                buf = tail + chunk
+                if needle in buf:
                     return True
-                if needle in chunk:
-                    return True
-                tail = chunk[-keep:] if keep else b""
+                tail = buf[len(buf) - keep :]
     except (OSError, EOFError):
         return True
     return False
