@@ -208,8 +208,9 @@ def test_the_mingap_factor_sets_how_close_is_a_collision(factor: float, tmp_path
 class _FakeSumo:
     """Vehicle and lane domains over fixed data, for ``_same_way``."""
 
-    def __init__(self, cars: dict[str, tuple[str, float, float]], links: dict[str, list[tuple[str, str]]]) -> None:
-        self.cars, self.links = cars, links
+    def __init__(self, cars: dict[str, tuple[str, float, float]], links: dict[str, list[tuple[str, str]]],
+                 routes: dict[str, tuple[str, ...]] | None = None) -> None:
+        self.cars, self.links, self.routes = cars, links, routes or {}
 
     def getLaneID(self, vid: str) -> str:
         return self.cars[vid][0]
@@ -219,6 +220,12 @@ class _FakeSumo:
 
     def getLength(self, vid: str) -> float:
         return self.cars[vid][2]
+
+    def getRoute(self, vid: str) -> tuple[str, ...]:
+        return self.routes.get(vid, ())
+
+    def getRouteIndex(self, vid: str) -> int:
+        return len(self.routes.get(vid, ())) - 1
 
     def getLinks(self, lane: str) -> list[tuple[Any, ...]]:
         return [(to, True, True, False, via, "M", "s", 5.0) for to, via in self.links.get(lane, [])]
@@ -246,6 +253,24 @@ def test_only_pairs_sumos_lane_check_compares_count() -> None:
     assert check._same_way("f", "other_way") is None
     assert check._same_way("f", "clear") is None
     assert check._same_way("f", "gone") is None and check._same_way("gone", "f") is None
+
+
+def test_at_a_merge_only_the_victims_own_way_counts() -> None:
+    """Onto c_0 the ways from a_0 (through :j_0_0) and b_0 (through :j_1_0)
+    merge. A victim with its front on c_0 and its back hanging back came
+    by one of them, known from the edge before on its route: compared with
+    a collider on that way only (Bologna's 42: SUMO's own check, under
+    ``warn``, reported nothing for a car standing on the other junction
+    lane). Where the route does not say (no edge before), compared as
+    before."""
+    links = {"a_0": [("c_0", ":j_0_0")], "b_0": [("c_0", ":j_1_0")], ":j_0_0": [("c_0", "")], ":j_1_0": [("c_0", "")]}
+    cars = {"on_a": (":j_0_0", 2.0, 5.0), "on_b": (":j_1_0", 2.0, 5.0), "from_b": ("c_0", 1.0, 5.0), "unknown": ("c_0", 1.0, 5.0)}
+    fake = _FakeSumo(cars, links, routes={"from_b": ("b", "c"), "unknown": ("c",)})
+    ways = {("a", "c_0"): frozenset({"a_0", ":j_0_0"}), ("b", "c_0"): frozenset({"b_0", ":j_1_0"})}
+    check = RemoteCollisions(fake, "teleport", -1.0, fake, lambda edge, lane: ways.get((edge, lane), frozenset()))
+    assert check._same_way("on_b", "from_b") == ":j_1_0"
+    assert check._same_way("on_a", "from_b") is None
+    assert check._same_way("on_a", "unknown") == ":j_0_0"
 
 
 def test_a_compare_counts_the_collisions_blendtrack_found(tmp_path: Path) -> None:

@@ -1694,6 +1694,11 @@ def test_the_network_lists_the_ways_that_merge(tmp_path: Path, build_net: Any) -
         assert net.lanes_after(way[0][0])[-1][0] == "out_0"
     assert net.ways_into("main_0") == []
     assert net.lanes_into_merges() == {"main_0", "side_0"}
+    # Each edge's way onto the merge: its lane and its own junction lanes only.
+    for edge in ("main", "side"):
+        way = next(w for w in ways if net.from_lane(w[0][0]) == edge + "_0")
+        assert net.ways_from(edge, "out_0") == {edge + "_0", *(name for name, _ in way)}
+    assert net.ways_from("out", "out_0") == frozenset() and net.ways_from("nowhere", "out_0") == frozenset()
 
 
 def test_a_leader_counts_when_the_vehicle_is_on_an_edge_without_the_target_lane() -> None:

@@ -52,6 +52,7 @@ class Network:
         self._foes: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
         self._after: dict[str, list[tuple[str, float]]] = {}
         self._prohibitors: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
+        self._ways_from: dict[tuple[str, str], frozenset[str]] = {}
         self._states: dict[str, str] = {}
         self._conflicts: dict[tuple[str, str], tuple[float, float]] = {}
         self._crossings: dict[tuple[str, str], tuple[float, float] | None] = {}
@@ -139,6 +140,26 @@ class Network:
                             into.setdefault(c.getToLane().getID(), []).append(chain)
             self._into = {k: v for k, v in into.items() if len(v) > 1}
         return self._into.get(lane, [])
+
+    def ways_from(self, edge: str, lane: str) -> frozenset[str]:
+        """The lanes of ``edge`` with a connection to ``lane`` and those
+        connections' junction lanes (empty when none leads there)."""
+        key = (edge, lane)
+        hit = self._ways_from.get(key)
+        if hit is None:
+            net = self.net()
+            found: set[str] = set()
+            try:
+                lanes = net.getEdge(edge).getLanes()
+            except KeyError:
+                lanes = []
+            for ln in lanes:
+                for c in ln.getOutgoing():
+                    if c.getToLane().getID() == lane:
+                        found.add(ln.getID())
+                        found.update(part.getID() for part in _via_chain(net, c))
+            hit = self._ways_from[key] = frozenset(found)
+        return hit
 
     def feeders(self, lane: str) -> tuple[tuple[str, float], ...]:
         """The lanes that lead onto ``lane`` (a normal lane) through one

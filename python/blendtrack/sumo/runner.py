@@ -205,7 +205,8 @@ class SumoRun:
         # subscriptions then keep the state the step ran under.
         self.conn.subscribe_lights = bool(self.step_hooks)
         self.conn.start()
-        self.remote_collisions = RemoteCollisions(self.conn.sumo.vehicle, *self._collision_options(), self.conn.sumo.lane)
+        self.remote_collisions = RemoteCollisions(self.conn.sumo.vehicle, *self._collision_options(), self.conn.sumo.lane,
+                                                  self.network.ways_from)
         completed = False
         try:
             end = self.opt.end_s if self.opt.end_s is not None else self.scenario.default_end_s
