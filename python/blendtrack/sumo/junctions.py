@@ -1034,9 +1034,7 @@ class Junctions:
         """At the waiting point of a turn across oncoming lanes: is a foe
         inside the junction, or about to enter it through an open link?
 
-        SUMO's ``getNextLinks`` does not report this internal link, and SUMO
-        registers a controlled vehicle as approaching a link only while its
-        own movement carries it (not after a ``moveTo`` or ``moveToXY``), so
+        SUMO's ``getNextLinks`` does not report this internal link, so
         the check is ours: a vehicle on a foe junction lane, or one on the
         lane leading to it, with its link open, within ``horizon_s`` seconds
         (``INTERNAL_YIELD_S`` at the point) or ``INTERNAL_YIELD_NEAR_M``
