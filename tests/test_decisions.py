@@ -878,7 +878,7 @@ def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tup
     tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda k: via), lights=SimpleNamespace(name=lambda k: f"tl{k}"))
     # No link state known (""): the decision rests on SUMO's getNextLinks; no zipper.
     network = SimpleNamespace(internal_vias={":j_w"}, waiting_point_after=lambda v: waiting,
-                              is_zipper=lambda v: False, link_state=lambda v: "", lanes_after=lambda v: [])
+                              is_zipper=lambda v: False, link_state=lambda v: "", lanes_after=lambda v: [], internal_foes=lambda v: [])
     j = Junctions(conn, network, tracks, fleet, 4.0)  # type: ignore[arg-type]
 
     def busy(vid: str, lane: str, horizon_s: float = jn.INTERNAL_YIELD_S, gap: float | None = None) -> bool:
@@ -908,6 +908,45 @@ def test_must_yield_on_a_link_without_priority_with_foes() -> None:
     j.fleet.next_stop = lambda slot: None
     seen["blocked"] = True
     assert not j.must_yield("me", 0), "no stop ahead: nothing to yield at"
+
+
+def test_a_vehicle_that_has_entered_across_a_way_with_priority_is_waited_for() -> None:
+    """"me" at 10 m/s is 20 m from its line (it can stop: 100 <= 2 x 4 x
+    20) on a link with priority whose way crosses the foe's 5 m in (6 m
+    into the foe's junction lane). It crosses, accelerating at 1 m/s^2,
+    in sqrt(100 + 2 x (20 + 5 + 2.5 + 5)) - 10 + 1 = 3.85 s. A SUMO driver
+    standing 0.01 m into the foe lane gets 2.5 m short of the crossing
+    (3.49 m) in sqrt(2 x 3.49 / 2.6) = 1.64 s: waited for. Not when "me"
+    could no longer stop at its line (13 m/s: 169 > 160), nor for a driver
+    whose back is 2.5 m past the crossing, nor on a foe lane that ends at
+    an internal waiting point, nor where the ways merge."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", speed=10.0, length=5.0)
+    v.add("s", speed=0.0, pos=0.01, length=5.0, lane=":j_foe")
+    conn.lanes[":j_foe"] = ["s"]
+    stops_inside = {":j_foe": False}
+    crossing: dict[str, Any] = {":j_foe": (5.0, 6.0)}
+    network = SimpleNamespace(internal_foes=lambda via: [(":j_foe", "foe_in", 50.0, "", -1), (":j_foe2", None, 0.0, "", -1)],
+                              crossing=lambda via, foe: crossing[foe],
+                              lanes_after=lambda foe: [(foe, 8.0), (":j_w", 4.0), ("out", 50.0)] if stops_inside[foe] else [(foe, 8.0), ("out", 50.0)],
+                              after_internal_junction=lambda lane: lane == ":j_w")
+    fleet = SimpleNamespace(s_front=lambda slot: 80.0)
+    j = Junctions(conn, network, None, fleet, 4.0)  # type: ignore[arg-type]
+    assert j.entered_across("me", 0, ":j_me", 100.0)
+    assert j.counts["entered_across_waits"] == 1
+    v.cars["me"]["speed"] = 13.0
+    assert not j.entered_across("me", 0, ":j_me", 100.0), "too late to stop at its line"
+    v.cars["me"]["speed"] = 10.0
+    v.cars["s"]["pos"] = 6.0 + 2.5 + 5.0 + 1e-6
+    assert not j.entered_across("me", 0, ":j_me", 100.0), "its back is past the crossing"
+    v.cars["s"]["pos"] = 0.01
+    crossing[":j_foe"] = None
+    assert not j.entered_across("me", 0, ":j_me", 100.0), "the ways merge"
+    crossing[":j_foe"] = (5.0, 6.0)
+    stops_inside[":j_foe"] = True
+    j2 = Junctions(conn, network, None, fleet, 4.0)  # type: ignore[arg-type]
+    assert not j2.entered_across("me", 0, ":j_me", 100.0), "a left turner waits at its internal point"
 
 
 def test_must_yield_asks_sumo_only_where_the_link_lacks_priority_now() -> None:
@@ -1105,7 +1144,7 @@ def test_junction_blocked_while_a_vehicle_heads_for_a_waiting_point_across_the_w
                               waiting_points_near=lambda via: near.get(via, ()))
     j = Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
     # Its body nowhere near the path yet (moving towards the point): waited for all the same.
-    assert j.junction_blocked("me", "in_0") and j.counts == {"inside_junction_waits": 0, "waiting_point_waits": 1, "keep_clear_waits": 0}
+    assert j.junction_blocked("me", "in_0") and j.counts == {"inside_junction_waits": 0, "waiting_point_waits": 1, "keep_clear_waits": 0, "entered_across_waits": 0}
     v.cars["turner"]["speed"] = 0.0
     assert j.junction_blocked("me", "in_0")
     near["in_0"] = ((":t_0", 2.2 - 1e-9),)

@@ -281,6 +281,7 @@ class SumoRun:
             "inside_junction_waits": self.junctions.counts["inside_junction_waits"],
             "waiting_point_waits": self.junctions.counts["waiting_point_waits"],
             "keep_clear_waits": self.junctions.counts["keep_clear_waits"],
+            "entered_across_waits": self.junctions.counts["entered_across_waits"],
             "courtesy_steps": lanes["courtesy_steps"],
             "cut_in_steps": lanes["cut_in_steps"],
             "far_side_holds": lanes["far_side_holds"],
