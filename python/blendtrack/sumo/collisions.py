@@ -122,9 +122,10 @@ class RemoteCollisions:
         """The collider's lane if SUMO's lane check would compare the two
         there: both on that lane, or the victim's back on it (the victim's
         front on a lane that lane leads to, directly or through a junction
-        lane, on its way from the edge before: ``_came_by``); None otherwise (``getLeader`` and ``getFollower`` also report
-        vehicles on lanes that merge further on, which SUMO's lane check
-        does not compare)."""
+        lane, on its way from the edge before: ``_came_by``); None
+        otherwise (``getLeader`` and ``getFollower`` also report vehicles on
+        lanes that merge further on, which SUMO's lane check does not
+        compare)."""
         veh = self.vehicle
         try:
             a, b = str(veh.getLaneID(collider)), str(veh.getLaneID(victim))

@@ -283,7 +283,7 @@ class Junctions:
                     return True
             elif state and state not in "MGOZ" and self.link_busy(vid, slot, via, stop[0]):
                 return True
-            elif state in "MGO" and state and self.entered_across(vid, slot, via, stop[0]):
+            elif state and state in "MGO" and self.entered_across(vid, slot, via, stop[0]):
                 return True
             # SUMO's word on foes, but not at an all-way stop, where it
             # reports the foes halted at their lines as foes, nor where the
