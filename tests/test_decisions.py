@@ -929,8 +929,7 @@ def test_a_vehicle_that_has_entered_across_a_way_with_priority_is_waited_for() -
     crossing: dict[str, Any] = {":j_foe": (5.0, 6.0)}
     network = SimpleNamespace(internal_foes=lambda via: [(":j_foe", "foe_in", 50.0, "", -1), (":j_foe2", None, 0.0, "", -1)],
                               crossing=lambda via, foe: crossing[foe],
-                              lanes_after=lambda foe: [(foe, 8.0), (":j_w", 4.0), ("out", 50.0)] if stops_inside[foe] else [(foe, 8.0), ("out", 50.0)],
-                              after_internal_junction=lambda lane: lane == ":j_w")
+                              stops_inside=lambda foe: stops_inside[foe])
     fleet = SimpleNamespace(s_front=lambda slot: 80.0)
     j = Junctions(conn, network, None, fleet, 4.0)  # type: ignore[arg-type]
     assert j.entered_across("me", 0, ":j_me", 100.0)
@@ -945,8 +944,7 @@ def test_a_vehicle_that_has_entered_across_a_way_with_priority_is_waited_for() -
     assert not j.entered_across("me", 0, ":j_me", 100.0), "the ways merge"
     crossing[":j_foe"] = (5.0, 6.0)
     stops_inside[":j_foe"] = True
-    j2 = Junctions(conn, network, None, fleet, 4.0)  # type: ignore[arg-type]
-    assert not j2.entered_across("me", 0, ":j_me", 100.0), "a left turner waits at its internal point"
+    assert not j.entered_across("me", 0, ":j_me", 100.0), "a left turner waits at its internal point"
 
 
 def test_must_yield_asks_sumo_only_where_the_link_lacks_priority_now() -> None:
@@ -1189,6 +1187,8 @@ def test_the_network_lists_the_waiting_points_near_a_way(tmp_path: Path, build_n
     assert via not in listed
     own_left = [c for c in sumo_net.getEdge("nc").getLane(0).getOutgoing() if c.getTo().getID() == "ce"][0]
     assert own_left.getViaLaneID() not in listed, "a vehicle from the same lane is ahead: followed"
+    # The left turn's way stops at its waiting point; the straight one does not.
+    assert net.stops_inside(first_left) and not net.stops_inside(via)
     for lane in listed:
         c = net.connection_of(lane)
         assert c is not None and c.getViaLaneID() == lane and sumo_net.getLane(lane).getOutgoing()[0].getViaLaneID(), lane

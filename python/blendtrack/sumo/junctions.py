@@ -140,8 +140,6 @@ class Junctions:
         #: another TraCI client)? Then ``refresh_tls`` reads each anew.
         self.lights_anew = True
         self.counts = {"inside_junction_waits": 0, "waiting_point_waits": 0, "keep_clear_waits": 0, "entered_across_waits": 0}
-        #: Junction lane -> does its way stop at an internal waiting point (``_stops_inside``)?
-        self._stop_inside: dict[str, bool] = {}
         #: The controlled vehicles told to wait at their line last step, and
         #: this step's so far (``new_step`` moves them over).
         self.waiting: set[str] = set()
@@ -876,7 +874,6 @@ class Junctions:
         v = max(float(get_speed(vid)), 0.0)
         gap = max(stop_s - self.fleet.s_front(slot), 0.0)
         length = float(veh.getLength(vid))
-        a = self.plan_accel
         patience = _Patience(self, vid, via, v, gap)
 
         def first(other: str, d: float, t_cross: float) -> bool:
@@ -888,8 +885,7 @@ class Junctions:
             return arrive < t_cross and not patience.lets_go(other, d, speed, arrive, t_cross)
 
         for foe, incoming, lane_length, tls, link, ours, theirs in foes:
-            dist = gap + ours + CONFLICT_CLEAR_M + length
-            t_cross = (math.sqrt(v * v + 2.0 * a * dist) - v) / a + CROSS_MARGIN_S
+            t_cross = self._crossing_time(v, gap + ours, length)
             # (No vehicle on the foe lane: none inside it in the way.)
             if vehicles_on(foe) and self._inside_in_time(vid, via, foe, t_cross, patience):
                 return True
@@ -933,29 +929,27 @@ class Junctions:
         if v * v > 2.0 * self.plan_decel * gap:
             return False
         length = float(self.conn.sumo.vehicle.getLength(vid))
-        a = self.plan_accel
         vehicles_on = self.conn.vehicles_on
         for foe, incoming, *_ in self.network.internal_foes(via):
-            if incoming is None or not vehicles_on(foe) or self._stops_inside(foe):
+            if incoming is None or not vehicles_on(foe) or self.network.stops_inside(foe):
                 continue
             crossing = self.network.crossing(via, foe)
             if crossing is None:
                 continue  # the ways merge: ``leader_at_merge``
-            dist = gap + crossing[0] + CONFLICT_CLEAR_M + length
-            t_cross = (math.sqrt(v * v + 2.0 * a * dist) - v) / a + CROSS_MARGIN_S
+            t_cross = self._crossing_time(v, gap + crossing[0], length)
             if self._inside_in_time(vid, via, foe, t_cross, None):
                 self.counts["entered_across_waits"] += 1
                 return True
         return False
 
-    def _stops_inside(self, foe: str) -> bool:
-        """Does the way of junction lane ``foe`` stop at an internal waiting
-        point after it (a turn across oncoming lanes)?"""
-        hit = self._stop_inside.get(foe)
-        if hit is None:
-            after = self.network.lanes_after(foe)
-            hit = self._stop_inside[foe] = any(self.network.after_internal_junction(part) for part, _ in after[1:-1])
-        return hit
+    def _crossing_time(self, v: float, to_point: float, length: float) -> float:
+        """The time (s) a vehicle at speed ``v`` needs, accelerating at
+        ``plan_accel``, to get its back (``length``) ``CONFLICT_CLEAR_M``
+        past the point where two ways cross, ``to_point`` ahead of its
+        front, plus ``CROSS_MARGIN_S``."""
+        a = self.plan_accel
+        dist = to_point + CONFLICT_CLEAR_M + length
+        return (math.sqrt(v * v + 2.0 * a * dist) - v) / a + CROSS_MARGIN_S
 
     def _foe_before(self, vid: str, incoming: str, beyond: float, first: Any, t_cross: float) -> bool:
         """Is a foe on its way onto the short lane ``incoming`` from beyond

@@ -53,6 +53,7 @@ class Network:
         self._after: dict[str, list[tuple[str, float]]] = {}
         self._prohibitors: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
         self._ways_from: dict[tuple[str, str], frozenset[str]] = {}
+        self._stops_inside: dict[str, bool] = {}
         self._states: dict[str, str] = {}
         self._conflicts: dict[tuple[str, str], tuple[float, float]] = {}
         self._crossings: dict[tuple[str, str], tuple[float, float] | None] = {}
@@ -316,6 +317,16 @@ class Network:
                         break
                     offset += float(part.getLength())
             self._waiting_points[via] = hit
+        return hit
+
+    def stops_inside(self, via: str) -> bool:
+        """Does the way through junction lane ``via`` stop at an internal
+        waiting point after it (a turn across oncoming lanes)? Unlike
+        ``waiting_point_after``, known for any junction lane, not only the
+        ones on a controlled vehicle's track."""
+        hit = self._stops_inside.get(via)
+        if hit is None:
+            hit = self._stops_inside[via] = any(self.after_internal_junction(part) for part, _ in self.lanes_after(via)[1:-1])
         return hit
 
     def after_internal_junction(self, via: str) -> bool:
