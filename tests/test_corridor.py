@@ -1,7 +1,8 @@
 """The corridor of SUMO runs (RunOptions.corridor, `--corridor`): what
-limits the speed in curves. "arc" (the default) previews the curve speeds
-sqrt(a_y / |kappa|) along the path; "lane" is the paper's ray cast against
-the lane's half width; "carriageway" the same against the whole road."""
+limits the speed in curves. "lane" (the default) is the paper's ray cast
+against the lane's half width; "arc" previews the curve speeds
+sqrt(a_y / |kappa|) along the path; "road" takes the faster of the two;
+"carriageway" is the ray cast against the whole road."""
 
 from __future__ import annotations
 
@@ -136,7 +137,7 @@ def _predicted_mean_speed(corridor: str, end_s: float, a_y: float) -> float:
     return dist / time
 
 
-def test_the_arc_corridor_is_faster_than_the_lane_on_the_rural_loop(tmp_path: Path) -> None:
+def test_the_arc_and_road_corridors_are_faster_than_the_lane_on_the_rural_loop(tmp_path: Path) -> None:
     """The same vehicles on the rural loop (150 s, seed 0): with the lane's
     half width the ray cast sees about 42 m through an R = 500 m curve and
     caps the speed near 14.7 m/s (rust curve_speed tests); the arc corridor
@@ -147,10 +148,10 @@ def test_the_arc_corridor_is_faster_than_the_lane_on_the_rural_loop(tmp_path: Pa
     test_rural_loop_tracks_lanes_within_comfort)."""
     sc = sumo.resolve_scenario("rural_loop")
     results = {}
-    for corridor in ("lane", "arc"):
+    for corridor in ("lane", "arc", "road"):
         opts = RunOptions(end_s=150, progress=False, corridor=corridor)
         results[corridor] = sumo.run_scenario(sc, opts, tmp_path / corridor)
-    arc, lane = results["arc"], results["lane"]
+    arc, lane, road = results["arc"], results["lane"], results["road"]
     assert arc.summary["corridor"] == "arc" and lane.summary["corridor"] == "lane"
     assert arc.summary["collisions"] == 0 and arc.summary["teleports"] == 0
     # The gain the closed forms predict on the loop's own curves (the arc
@@ -172,11 +173,21 @@ def test_the_arc_corridor_is_faster_than_the_lane_on_the_rural_loop(tmp_path: Pa
     with open(tmp_path / "arc" / "vehicles.csv") as f:
         worst = max(float(r["lateral_accel_max_mps2"]) for r in csv.DictReader(f))
     assert worst < 1.1 * sc.comfort_lateral_accel_mps2, worst
+    # "road" takes the faster of the two laws: at least the arc's speed
+    # (2 % for the traffic, which differs once any vehicle does; measured
+    # 16.54 against 16.40 m/s), and above the comfort bound only where the
+    # ray cast is the faster, at the short kinks where lanes meet (measured
+    # 2.32 m/s^2 at worst; 25 % is a tolerance, not derived).
+    assert road.summary["corridor"] == "road" and road.summary["collisions"] == 0
+    assert _mean_speed(road) >= 0.98 * _mean_speed(arc), (_mean_speed(road), _mean_speed(arc))
+    with open(tmp_path / "road" / "vehicles.csv") as f:
+        worst = max(float(r["lateral_accel_max_mps2"]) for r in csv.DictReader(f))
+    assert worst < 1.25 * sc.comfort_lateral_accel_mps2, worst
 
 
 def test_a_corridor_that_does_not_exist_is_an_error() -> None:
-    with pytest.raises(sumo.ScenarioError, match="corridor 'road'"):
-        RunOptions(corridor="road")
+    with pytest.raises(sumo.ScenarioError, match="corridor 'motorway': must be one of lane, arc, road, carriageway"):
+        RunOptions(corridor="motorway")
 
 
 def test_braking_without_a_plan_is_bounded_by_the_vtypes_emergency_decel(tmp_path: Path) -> None:

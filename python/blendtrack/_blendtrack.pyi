@@ -119,6 +119,7 @@ class ControllerConfig:
     emergency_deceleration: float
     curve_lateral_accel: float
     curve_deceleration: float
+    curve_with_ray: bool
     alpha_mode: str
     auto_alpha_forward: float
     auto_alpha_backward: float

@@ -12,7 +12,7 @@ from blendtrack.sumo.scenario import ScenarioError
 
 
 #: The corridors a SUMO run can use (``RunOptions.corridor``).
-CORRIDORS = ("lane", "arc", "carriageway")
+CORRIDORS = ("lane", "arc", "road", "carriageway")
 
 
 @dataclass

@@ -61,11 +61,15 @@ class Selection:
         )
         self.base_vehicle = options.vehicle or VehicleParams()
         self.base_config = self.base_config.with_alpha(options.alpha)
+        curves = options.corridor in ("arc", "road")
         if "curve_lateral_accel" not in options.fixed_keys:
-            # The arc corridor keeps to the scenario's comfort bound; the
-            # others are the paper's ray cast (curve_lateral_accel 0).
-            a_y = conn.scenario.comfort_lateral_accel_mps2 if options.corridor == "arc" else 0.0
+            # The arc and road corridors keep to the scenario's comfort bound;
+            # the others are the paper's ray cast (curve_lateral_accel 0).
+            a_y = conn.scenario.comfort_lateral_accel_mps2 if curves else 0.0
             self.base_config = self.base_config.replace(curve_lateral_accel=a_y)
+        if "curve_with_ray" not in options.fixed_keys:
+            # road: the faster of the ray cast and the curve speeds.
+            self.base_config = self.base_config.replace(curve_with_ray=options.corridor == "road")
         self._types: dict[str, dict[str, Any]] = {}
         #: The vTypes --controlled-type stands for (a distribution: its members).
         self.controlled_types: set[str] = set()

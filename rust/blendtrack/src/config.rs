@@ -110,6 +110,14 @@ pub struct ControllerConfig {
     /// Deceleration (m/s^2, < 0) at which curve speeds are previewed: a
     /// vehicle brakes for a curve ahead at about this much.
     pub curve_deceleration: f64,
+    /// With `curve_lateral_accel` > 0: keep the ray cast too and apply the
+    /// faster of the two commands (the SUMO runs' `road` corridor): the curve
+    /// speeds lift the ray's cap in wide curves (a lane's corridor holds a
+    /// car to about 15 m/s through R = 500 m), the ray cast lets a short kink
+    /// of the track (lane joints, which the curve speeds would crawl through)
+    /// be driven as the paper's law drives it. False: the curve speeds
+    /// replace the ray cast.
+    pub curve_with_ray: bool,
 
     // ---- Automatic alpha (beyond the paper; see `lateral::auto_alpha`) ----
     /// "fixed" (default) or "auto".
@@ -167,6 +175,7 @@ impl Default for ControllerConfig {
             emergency_deceleration: -9.0,
             curve_lateral_accel: 0.0,
             curve_deceleration: -2.0,
+            curve_with_ray: false,
             border_margin_m: 0.0,
             ray_horizon_m: 200.0,
             alpha_mode: AlphaMode::Fixed,

@@ -343,7 +343,8 @@ impl Controller {
         self.hint_segments = [rear.segment, front.segment, cp.segment, seg_look];
         let th_travel = travel_heading(measured.theta_rad, dir);
 
-        let (d_obs, accel) = if self.cfg.curve_lateral_accel > 0.0 {
+        let curves = self.cfg.curve_lateral_accel > 0.0;
+        let (d_obs, accel) = if curves && !self.cfg.curve_with_ray {
             // Curve speeds previewed along the arc instead of the virtual obstacle.
             let lon = longitudinal_accel(speed, None, obstacles, &self.cfg);
             let curve = curve_accel(&track.curves, rear.s, speed, &self.cfg);
@@ -370,7 +371,16 @@ impl Controller {
                 &mut self.ray_hints,
             );
             let lon = longitudinal_accel(speed, d_obs, obstacles, &self.cfg);
-            (d_obs, lon.accel_mps2)
+            if curves && d_obs.is_some() {
+                // The faster of the ray's command and the curve speeds', never
+                // above the command without the border (the obstacles' and
+                // free flow's): max(ray, min(no border, curve)).
+                let free = longitudinal_accel(speed, None, obstacles, &self.cfg).accel_mps2;
+                let curve = curve_accel(&track.curves, rear.s, speed, &self.cfg);
+                (d_obs, lon.accel_mps2.max(free.min(curve)))
+            } else {
+                (d_obs, lon.accel_mps2)
+            }
         };
         // A finite state within range gives a finite command; should a
         // corner of the geometry still overflow, say so rather than return NaN.

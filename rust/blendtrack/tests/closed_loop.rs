@@ -345,3 +345,52 @@ fn bad_sim_options_are_errors() {
     let e = sim(&track, &bad, &sched, &SimOptions::default()).unwrap_err();
     assert!(e.to_string().contains("lat_blend_factor"), "{e}");
 }
+
+#[test]
+fn curve_with_ray_takes_the_faster_of_the_ray_and_the_curve_speed_on_a_circle() {
+    // On a circle of radius R in a corridor of half width w the ray from the
+    // rear axle along the heading leaves the corridor sqrt(2 R w + w^2)
+    // ahead, and the stopping law for it settles where
+    // v tau + v^2 / (-2 b_f) = d (tau = 1 s, b_f = -4: v^2 / 8 + v = d);
+    // the curve speed is sqrt(a_y R). With `curve_with_ray` the steady speed
+    // is the larger of the two, from either side of the crossover.
+    let (r, w) = (200.0_f64, 1.75_f64);
+    let d = (2.0 * r * w + w * w).sqrt();
+    let v_ray = -4.0 + (16.0 + 8.0 * d).sqrt(); // 11.2 m/s
+    let steady = |a_y: f64, with_ray: bool| {
+        let cfg = ControllerConfig {
+            preferred_speed: 30.0,
+            path_width_m: 2.0 * w,
+            curve_lateral_accel: a_y,
+            curve_with_ray: with_ray,
+            ..Default::default()
+        };
+        let opts = SimOptions {
+            duration_s: 120.0,
+            initial_speed_mps: 5.0,
+            ..Default::default()
+        };
+        let tr = run(Path::circle(r, 1e-4).unwrap(), cfg, opts);
+        tail_mean(&tr.v_mps, 1000)
+    };
+    // The paper's law alone, and the curve speeds alone, are the closed forms.
+    let lane = steady(0.0, false);
+    assert!(
+        (lane - v_ray).abs() < 0.02 * v_ray,
+        "ray only: {lane} vs {v_ray}"
+    );
+    for (a_y, expected) in [(2.0, (2.0 * r).sqrt()), (0.3, v_ray)] {
+        let both = steady(a_y, true);
+        assert!(
+            (both - expected).abs() < 0.02 * expected,
+            "a_y = {a_y}: {both} vs {expected}"
+        );
+    }
+    // Below the crossover the ray's speed is the one kept: the curve speed
+    // alone would be slower.
+    let arc_only = steady(0.3, false);
+    assert!(
+        (arc_only - (0.3 * r).sqrt()).abs() < 0.02 * (0.3 * r).sqrt(),
+        "{arc_only}"
+    );
+}
