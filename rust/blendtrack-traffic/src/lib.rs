@@ -210,6 +210,40 @@ struct Driven {
     stats: DriveStats,
 }
 
+/// The most (m) a vehicle's state is moved on to where the simulator has
+/// its front when it changes track ([`caught_up`]).
+const CATCH_UP_MAX_M: f64 = 2.0;
+
+/// Vehicle `d`'s state moved on along its heading to where the simulator
+/// has its front, when the simulator has it ahead on the same lane by up to
+/// [`CATCH_UP_MAX_M`]; the state as it is otherwise. A speed-only move lets
+/// the simulator run a little ahead (it is brought back over a few steps,
+/// never moved backwards: `placement::glide_move`), but a new track (a lane
+/// change) starts with (x, y) moves from blendtrack's own state: a car
+/// creeping in a queue at Eccles, the simulator 0.7 m ahead of it, was put
+/// 0.16 m back by its first move onto the lane beside, onto the SUMO driver
+/// 0.4 m behind it, a collision (seed 1, 445 s, `--corridor road`).
+fn caught_up(d: &Driven) -> VehicleState {
+    let mut state = d.state;
+    let Some((lane, at)) = d.known else {
+        return state;
+    };
+    let (own_lane, _) = d.route.lane_position(d.s_front_m);
+    if own_lane != lane || !d.s_front_m.is_finite() {
+        return state;
+    }
+    let from = (d.s_front_m - CATCH_UP_MAX_M).max(0.0);
+    let Some(s_known) = d.route.arc_at_lane_position(lane, at, from) else {
+        return state;
+    };
+    let ahead = s_known - d.s_front_m;
+    if ahead > 0.0 && ahead <= CATCH_UP_MAX_M {
+        state.x_m += ahead * state.theta_rad.cos();
+        state.y_m += ahead * state.theta_rad.sin();
+    }
+    state
+}
+
 /// A [`Fleet`] driving road routes (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct RouteFleet {
@@ -423,12 +457,14 @@ impl RouteFleet {
         let route = self.route_of_track(track_id)?;
         let d = self.driven(slot)?;
         let reach_m = d.body.reach_m;
-        let (s_front_m, on_lap) = self.front_arc(track_id, &d.state, reach_m, occurrence)?;
+        let state = caught_up(d);
+        let (s_front_m, on_lap) = self.front_arc(track_id, &state, reach_m, occurrence)?;
         self.fleet.set_vehicle_track(slot, track_id)?;
         if on_lap {
             self.fleet.seed_vehicle_hints(slot, s_front_m - reach_m)?;
         }
         let d = self.driven[slot as usize].as_mut().expect("checked above");
+        d.state = state;
         d.route = route;
         d.s_front_m = s_front_m;
         d.seg_front = usize::MAX;
@@ -708,6 +744,41 @@ mod tests {
             top = top.max(f.state(a).unwrap().v_mps);
         }
         assert!(top <= 20.0 + 1e-9 && top > 19.0, "{top}");
+    }
+
+    #[test]
+    fn retrack_catches_up_with_a_simulator_a_little_ahead() {
+        // The simulator has the front `ahead` m further on lane 10 than
+        // blendtrack's state: a new track starts from there when that is
+        // 0 < ahead <= 2 m (never backwards, never a lost vehicle's jump).
+        for (ahead, moved) in [(0.7, 0.7), (1.9, 1.9), (-0.7, 0.0), (2.5, 0.0)] {
+            let (mut f, t) = fleet_on(road(None, true));
+            let t2 = f
+                .add_route(
+                    road(None, true).0,
+                    ControllerConfig::default(),
+                    road(None, true).1,
+                )
+                .unwrap() as i64;
+            let a = f
+                .add_vehicle(t, None, None, body(), at(50.0, 1.0), None)
+                .unwrap() as i64;
+            let (sf, x0) = (f.s_front(a).unwrap(), f.state(a).unwrap().x_m);
+            f.plan(&Observations {
+                slots: &[a],
+                leader_gap_m: &[f64::NAN],
+                leader_slot: &[-1],
+                leader_speed_mps: &[f64::NAN],
+                lane: &[10],
+                lane_pos_m: &[sf + ahead],
+                soft: None,
+            })
+            .unwrap();
+            f.retrack(a, t2).unwrap();
+            let got = f.state(a).unwrap().x_m - x0;
+            assert!((got - moved).abs() < 1e-9, "{ahead} m ahead: moved {got}");
+            assert!((f.s_front(a).unwrap() - (sf + moved)).abs() < 1e-9);
+        }
     }
 
     #[test]

@@ -217,7 +217,27 @@ impl RouteFleet {
                 .map(|((f, a), &g)| f.route.arc_gap(f.s_m + a, g))
                 .collect()
         };
-        let converted = with_stations.then(|| (along(gaps.leader), along(gaps.soft)));
+        // A moving leader: its stop point through the stations, as the
+        // stopping law sees it (`Route::arc_gap_moving`).
+        let leaders_along = || -> Result<Vec<f64>, TrafficError> {
+            let mut out = Vec::with_capacity(n);
+            for (i, ((f, a), &g)) in fronts.iter().zip(advance).zip(gaps.leader).enumerate() {
+                let b_l = self
+                    .fleet
+                    .vehicle_config(plan.slots[i] as i64)?
+                    .max_obs_deceleration;
+                let v_l = gaps.leader_speed[i].max(0.0);
+                out.push(
+                    f.route
+                        .arc_gap_moving(f.s_m + a, g, v_l * v_l / (-2.0 * b_l)),
+                );
+            }
+            Ok(out)
+        };
+        let converted = match with_stations {
+            true => Some((leaders_along()?, along(gaps.soft))),
+            false => None,
+        };
         let gaps = match &converted {
             Some((leader, soft)) => HeldGaps {
                 leader,
