@@ -211,8 +211,9 @@ struct Driven {
 }
 
 /// The most (m) a vehicle's state is moved on to where the simulator has
-/// its front when it changes track ([`caught_up`]).
-const CATCH_UP_MAX_M: f64 = 2.0;
+/// its front: when it changes track ([`caught_up`]) or is moved by (x, y)
+/// (`step::simulator_ahead`). Further ahead is a lost vehicle, not a lag.
+pub(crate) const CATCH_UP_MAX_M: f64 = 2.0;
 
 /// Vehicle `d`'s state moved on along its heading to where the simulator
 /// has its front, when the simulator has it ahead on the same lane by up to
@@ -225,21 +226,12 @@ const CATCH_UP_MAX_M: f64 = 2.0;
 /// 0.4 m behind it, a collision (seed 1, 445 s, `--corridor road`).
 fn caught_up(d: &Driven) -> VehicleState {
     let mut state = d.state;
-    let Some((lane, at)) = d.known else {
-        return state;
-    };
-    let (own_lane, _) = d.route.lane_position(d.s_front_m);
-    if own_lane != lane || !d.s_front_m.is_finite() {
-        return state;
-    }
-    let from = (d.s_front_m - CATCH_UP_MAX_M).max(0.0);
-    let Some(s_known) = d.route.arc_at_lane_position(lane, at, from) else {
-        return state;
-    };
-    let ahead = s_known - d.s_front_m;
-    if ahead > 0.0 && ahead <= CATCH_UP_MAX_M {
-        state.x_m += ahead * state.theta_rad.cos();
-        state.y_m += ahead * state.theta_rad.sin();
+    if d.s_front_m.is_finite() {
+        let k = d.route.piece_at(d.s_front_m);
+        if let Some(ahead) = step::simulator_ahead(d, k, d.s_front_m) {
+            state.x_m += ahead * state.theta_rad.cos();
+            state.y_m += ahead * state.theta_rad.sin();
+        }
     }
     state
 }
