@@ -69,7 +69,8 @@ class RunOptions:
     #: path, a_y = the config's ``curve_lateral_accel`` when set, else the
     #: scenario's comfort bound on lateral acceleration; "lane" (the default) the paper's
     #: virtual borders at the lane's half width (plus ``border_margin_m``) and
-    #: its ray cast; "carriageway" the same ray cast with the borders at the
+    #: its ray cast; "road" the faster of "lane" and "arc" (config
+    #: ``curve_with_ray``); "carriageway" the same ray cast with the borders at the
     #: edges of the lane's whole edge (junction lanes keep their half width).
     corridor: str = "lane"
     #: Stop at the end of the route (a standing obstacle there). By default

@@ -756,16 +756,7 @@ mod tests {
                 .add_vehicle(t, None, None, body(), at(50.0, 1.0), None)
                 .unwrap() as i64;
             let (sf, x0) = (f.s_front(a).unwrap(), f.state(a).unwrap().x_m);
-            f.plan(&Observations {
-                slots: &[a],
-                leader_gap_m: &[f64::NAN],
-                leader_slot: &[-1],
-                leader_speed_mps: &[f64::NAN],
-                lane: &[10],
-                lane_pos_m: &[sf + ahead],
-                soft: None,
-            })
-            .unwrap();
+            plan_one(&mut f, a, (f64::NAN, f64::NAN), (10, sf + ahead));
             f.retrack(a, t2).unwrap();
             let got = f.state(a).unwrap().x_m - x0;
             assert!((got - moved).abs() < 1e-9, "{ahead} m ahead: moved {got}");

@@ -417,16 +417,7 @@ mod tests {
             st.y_m = 0.6;
             let a = f.add_vehicle(t, None, None, body(), st, None).unwrap() as i64;
             let sf = f.s_front(a).unwrap();
-            f.plan(&Observations {
-                slots: &[a],
-                leader_gap_m: &[f64::NAN],
-                leader_slot: &[-1],
-                leader_speed_mps: &[f64::NAN],
-                lane: &[10],
-                lane_pos_m: &[sf + ahead],
-                soft: None,
-            })
-            .unwrap();
+            plan_one(&mut f, a, (f64::NAN, f64::NAN), (10, sf + ahead));
             let out = f.step(&[], DT).unwrap();
             assert_eq!(out.moves, [Move::Xy]);
             let front = out.x_front_m[0];
