@@ -738,20 +738,23 @@ mod tests {
         assert!(top <= 20.0 + 1e-9 && top > 19.0, "{top}");
     }
 
+    /// A fleet on the test road, with a second track of the same road.
+    fn fleet_on_two_tracks() -> (RouteFleet, i64, i64) {
+        let (mut f, t) = fleet_on(road(None, true));
+        let (path, route) = road(None, true);
+        let t2 = f
+            .add_route(path, ControllerConfig::default(), route)
+            .unwrap() as i64;
+        (f, t, t2)
+    }
+
     #[test]
     fn retrack_catches_up_with_a_simulator_a_little_ahead() {
         // The simulator has the front `ahead` m further on lane 10 than
         // blendtrack's state: a new track starts from there when that is
         // 0 < ahead <= 2 m (never backwards, never a lost vehicle's jump).
         for (ahead, moved) in [(0.7, 0.7), (1.9, 1.9), (-0.7, 0.0), (2.5, 0.0)] {
-            let (mut f, t) = fleet_on(road(None, true));
-            let t2 = f
-                .add_route(
-                    road(None, true).0,
-                    ControllerConfig::default(),
-                    road(None, true).1,
-                )
-                .unwrap() as i64;
+            let (mut f, t, t2) = fleet_on_two_tracks();
             let a = f
                 .add_vehicle(t, None, None, body(), at(50.0, 1.0), None)
                 .unwrap() as i64;
@@ -766,14 +769,7 @@ mod tests {
 
     #[test]
     fn retrack_keeps_state_and_statistics() {
-        let (mut f, t) = fleet_on(road(None, true));
-        let t2 = f
-            .add_route(
-                road(None, true).0,
-                ControllerConfig::default(),
-                road(None, true).1,
-            )
-            .unwrap() as i64;
+        let (mut f, t, t2) = fleet_on_two_tracks();
         let a = f
             .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;

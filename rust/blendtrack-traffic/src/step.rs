@@ -224,7 +224,7 @@ impl RouteFleet {
             for (i, ((f, a), &g)) in fronts.iter().zip(advance).zip(gaps.leader).enumerate() {
                 let b_l = self
                     .fleet
-                    .vehicle_config(plan.slots[i] as i64)?
+                    .vehicle_config(plan.slots[i])?
                     .max_obs_deceleration;
                 let v_l = gaps.leader_speed[i].max(0.0);
                 out.push(
