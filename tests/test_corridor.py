@@ -173,16 +173,17 @@ def test_the_arc_and_road_corridors_are_faster_than_the_lane_on_the_rural_loop(t
     with open(tmp_path / "arc" / "vehicles.csv") as f:
         worst = max(float(r["lateral_accel_max_mps2"]) for r in csv.DictReader(f))
     assert worst < 1.1 * sc.comfort_lateral_accel_mps2, worst
-    # "road" takes the faster of the two laws: at least the arc's speed
-    # (2 % for the traffic, which differs once any vehicle does; measured
-    # 16.54 against 16.40 m/s), and above the comfort bound only where the
-    # ray cast is the faster, at the short kinks where lanes meet (measured
-    # 2.32 m/s^2 at worst; 25 % is a tolerance, not derived).
+    # "road" takes the faster of the ray cast and curve speeds read from the
+    # curvature averaged over 10 m: at least the arc's speed (2 % for the
+    # traffic, which differs once any vehicle does; measured 17.31 against
+    # 16.40 m/s), and above the comfort bound at the kinks where lanes meet,
+    # which the average smooths over and the track does not (measured
+    # 2.60 m/s^2 at worst; 1.4 times the bound is a tolerance, not derived).
     assert road.summary["corridor"] == "road" and road.summary["collisions"] == 0
     assert _mean_speed(road) >= 0.98 * _mean_speed(arc), (_mean_speed(road), _mean_speed(arc))
     with open(tmp_path / "road" / "vehicles.csv") as f:
         worst = max(float(r["lateral_accel_max_mps2"]) for r in csv.DictReader(f))
-    assert worst < 1.25 * sc.comfort_lateral_accel_mps2, worst
+    assert worst < 1.4 * sc.comfort_lateral_accel_mps2, worst
 
 
 def test_a_corridor_that_does_not_exist_is_an_error() -> None:

@@ -120,6 +120,7 @@ class ControllerConfig:
     curve_lateral_accel: float
     curve_deceleration: float
     curve_with_ray: bool
+    curve_smoothing_m: float
     alpha_mode: str
     auto_alpha_forward: float
     auto_alpha_backward: float

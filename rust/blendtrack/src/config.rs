@@ -110,6 +110,14 @@ pub struct ControllerConfig {
     /// Deceleration (m/s^2, < 0) at which curve speeds are previewed: a
     /// vehicle brakes for a curve ahead at about this much.
     pub curve_deceleration: f64,
+    /// Standard deviation (m, >= 0) of a Gaussian the path's curvature is
+    /// averaged with along the arc for the curve speeds; 0 (default): the
+    /// curvature as the controllers read it. A road's curve drawn as a
+    /// polyline (SUMO's lane shapes: vertices up to about 20 m apart on a
+    /// motorway curve) has its turning in kinks at the vertices, and the
+    /// curve speed of each kink is far below the curve's: Eccles' R = 230 m
+    /// loop read as R = 40 m at each vertex (9 m/s at 2 m/s^2, not 21).
+    pub curve_smoothing_m: f64,
     /// With `curve_lateral_accel` > 0: keep the ray cast too and apply the
     /// faster of the two commands (the SUMO runs' `road` corridor): the curve
     /// speeds lift the ray's cap in wide curves (a lane's corridor holds a
@@ -176,6 +184,7 @@ impl Default for ControllerConfig {
             curve_lateral_accel: 0.0,
             curve_deceleration: -2.0,
             curve_with_ray: false,
+            curve_smoothing_m: 0.0,
             border_margin_m: 0.0,
             ray_horizon_m: 200.0,
             alpha_mode: AlphaMode::Fixed,
@@ -293,6 +302,7 @@ impl ControllerConfig {
         non_negative("auto_alpha_error_gain", self.auto_alpha_error_gain)?;
         negative("emergency_deceleration", self.emergency_deceleration)?;
         non_negative("curve_lateral_accel", self.curve_lateral_accel)?;
+        non_negative("curve_smoothing_m", self.curve_smoothing_m)?;
         negative("curve_deceleration", self.curve_deceleration)?;
         Ok(())
     }

@@ -46,7 +46,7 @@ impl Track {
     /// Builds the borders from the path's widths or `cfg.path_width_m`.
     pub fn new(path: Path, cfg: &ControllerConfig) -> Self {
         let corridor = Corridor::new(&path, cfg);
-        let curves = CurveProfile::new(&path);
+        let curves = CurveProfile::new(&path, cfg.curve_smoothing_m);
         Track {
             path,
             corridor,
