@@ -396,9 +396,9 @@ mod tests {
     fn a_move_by_xy_never_puts_the_vehicle_back_behind_the_simulator() {
         // 0.6 m off its lane's centreline: moved by (x, y). The simulator
         // has the front `ahead` m further on lane 10 than blendtrack: the
-        // new front goes at least there (up to 2 m; further is a lost
+        // new front goes at least there (up to 5 m; further is a lost
         // vehicle, left to the placement check), and the state with it.
-        for (ahead, caught) in [(1.0, true), (0.0, false), (2.5, false)] {
+        for (ahead, caught) in [(1.0, true), (0.0, false), (5.5, false)] {
             let (mut f, t) = fleet_on(road(None, true));
             let mut st = at(50.0, 1.0);
             st.y_m = 0.6;

@@ -465,6 +465,10 @@ fn crossed_red(signals: &[Vec<Signal>], d: &Driven, s_new: f64) -> bool {
     })
 }
 
+/// The most (m) a piece's track may lie off its lane's centreline for
+/// [`simulator_ahead`] to compare lane positions there.
+const CATCH_UP_OFFSET_M: f64 = 0.1;
+
 /// How far (m of track, `0 < x <= CATCH_UP_MAX_M`) the simulator has the
 /// front of `d` ahead of arc length `sf_new` on piece `k`'s lane, when it
 /// has it on that lane: a move by (x, y) there would put the vehicle back.
@@ -477,7 +481,15 @@ fn crossed_red(signals: &[Vec<Signal>], d: &Driven, s_new: f64) -> bool {
 pub(crate) fn simulator_ahead(d: &Driven, k: usize, sf_new: f64) -> Option<f64> {
     let (lane, at) = d.known?;
     let piece = &d.route.pieces[k];
-    if piece.lane != lane || !sf_new.is_finite() || !(piece.scale > 0.0) {
+    // Only where the track lies on the lane: where it cuts a corner
+    // (a rounded turn, a junction lane it leaves) SUMO's lane position runs
+    // ahead of the arc length by design (`Route::arc_gap`), and moved on to
+    // it, cars at Bologna crossed their stop lines on red.
+    if piece.lane != lane
+        || !sf_new.is_finite()
+        || !(piece.scale > 0.0)
+        || !(piece.offset_m <= CATCH_UP_OFFSET_M)
+    {
         return None;
     }
     let ahead = (at - piece.lane_pos_at(sf_new)) / piece.scale;
