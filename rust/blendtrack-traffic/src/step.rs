@@ -234,9 +234,10 @@ impl RouteFleet {
             }
             Ok(out)
         };
-        let converted = match with_stations {
-            true => Some((leaders_along()?, along(gaps.soft))),
-            false => None,
+        let converted = if with_stations {
+            Some((leaders_along()?, along(gaps.soft)))
+        } else {
+            None
         };
         let gaps = match &converted {
             Some((leader, soft)) => HeldGaps {
@@ -295,9 +296,8 @@ impl RouteFleet {
         let d = self.driven[slot]
             .as_mut()
             .expect("planned slots are driven");
-        let state = state_at(next, i);
+        let mut state = state_at(next, i);
         let finite = stepped_finite(&state, out.s_rear_m[i]);
-        let mut state = state;
         let (v, th) = (state.v_mps, state.theta_rad);
         let reach = d.body.reach_m;
         let (mut xf, mut yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());
