@@ -210,36 +210,6 @@ struct Driven {
     stats: DriveStats,
 }
 
-/// The most (m) a vehicle's state is moved on to where the simulator has
-/// its front: when it changes track ([`caught_up`]) or is moved by (x, y)
-/// (`step::simulator_ahead`). Further ahead is a lost vehicle, not a lag
-/// (the bridge's placement check hands back one more than 5 m off). A
-/// stop-and-go crawl lets SUMO run 3 m ahead in 10 s (Eccles, seed 1,
-/// 420 s: each speed-only move is held within 0.1 m/s of the end speed,
-/// above the crawl's mean).
-pub(crate) const CATCH_UP_MAX_M: f64 = 5.0;
-
-/// Vehicle `d`'s state moved on along its heading to where the simulator
-/// has its front, when the simulator has it ahead on the same lane by up to
-/// [`CATCH_UP_MAX_M`]; the state as it is otherwise. A speed-only move lets
-/// the simulator run a little ahead (it is brought back over a few steps,
-/// never moved backwards: `placement::glide_move`), but a new track (a lane
-/// change) starts with (x, y) moves from blendtrack's own state: a car
-/// creeping in a queue at Eccles, the simulator 0.7 m ahead of it, was put
-/// 0.16 m back by its first move onto the lane beside, onto the SUMO driver
-/// 0.4 m behind it, a collision (seed 1, 445 s, `--corridor road`).
-fn caught_up(d: &Driven) -> VehicleState {
-    let mut state = d.state;
-    if d.s_front_m.is_finite() {
-        let k = d.route.piece_at(d.s_front_m);
-        if let Some(ahead) = step::simulator_ahead(d, k, d.s_front_m) {
-            state.x_m += ahead * state.theta_rad.cos();
-            state.y_m += ahead * state.theta_rad.sin();
-        }
-    }
-    state
-}
-
 /// A [`Fleet`] driving road routes (see the module docs).
 #[derive(Debug, Clone, Default)]
 pub struct RouteFleet {
@@ -453,14 +423,12 @@ impl RouteFleet {
         let route = self.route_of_track(track_id)?;
         let d = self.driven(slot)?;
         let reach_m = d.body.reach_m;
-        let state = caught_up(d);
-        let (s_front_m, on_lap) = self.front_arc(track_id, &state, reach_m, occurrence)?;
+        let (s_front_m, on_lap) = self.front_arc(track_id, &d.state, reach_m, occurrence)?;
         self.fleet.set_vehicle_track(slot, track_id)?;
         if on_lap {
             self.fleet.seed_vehicle_hints(slot, s_front_m - reach_m)?;
         }
         let d = self.driven[slot as usize].as_mut().expect("checked above");
-        d.state = state;
         d.route = route;
         d.s_front_m = s_front_m;
         d.seg_front = usize::MAX;
@@ -742,38 +710,16 @@ mod tests {
         assert!(top <= 20.0 + 1e-9 && top > 19.0, "{top}");
     }
 
-    /// A fleet on the test road, with a second track of the same road.
-    fn fleet_on_two_tracks() -> (RouteFleet, i64, i64) {
-        let (mut f, t) = fleet_on(road(None, true));
-        let (path, route) = road(None, true);
-        let t2 = f
-            .add_route(path, ControllerConfig::default(), route)
-            .unwrap() as i64;
-        (f, t, t2)
-    }
-
-    #[test]
-    fn retrack_catches_up_with_a_simulator_a_little_ahead() {
-        // The simulator has the front `ahead` m further on lane 10 than
-        // blendtrack's state: a new track starts from there when that is
-        // 0 < ahead <= 5 m (never backwards, never a lost vehicle's jump).
-        for (ahead, moved) in [(0.7, 0.7), (4.9, 4.9), (-0.7, 0.0), (5.5, 0.0)] {
-            let (mut f, t, t2) = fleet_on_two_tracks();
-            let a = f
-                .add_vehicle(t, None, None, body(), at(50.0, 1.0), None)
-                .unwrap() as i64;
-            let (sf, x0) = (f.s_front(a).unwrap(), f.state(a).unwrap().x_m);
-            plan_one(&mut f, a, (f64::NAN, f64::NAN), (10, sf + ahead));
-            f.retrack(a, t2).unwrap();
-            let got = f.state(a).unwrap().x_m - x0;
-            assert!((got - moved).abs() < 1e-9, "{ahead} m ahead: moved {got}");
-            assert!((f.s_front(a).unwrap() - (sf + moved)).abs() < 1e-9);
-        }
-    }
-
     #[test]
     fn retrack_keeps_state_and_statistics() {
-        let (mut f, t, t2) = fleet_on_two_tracks();
+        let (mut f, t) = fleet_on(road(None, true));
+        let t2 = f
+            .add_route(
+                road(None, true).0,
+                ControllerConfig::default(),
+                road(None, true).1,
+            )
+            .unwrap() as i64;
         let a = f
             .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;

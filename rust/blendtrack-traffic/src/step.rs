@@ -10,7 +10,7 @@ use crate::substep::{
     advance, braking_mean_speed, control_record, held_speed, past_route_end, state_at,
     stepped_finite, substeps, Front, HeldGaps, LastStep,
 };
-use crate::{Driven, RouteFleet, TrafficError, CATCH_UP_MAX_M};
+use crate::{Driven, RouteFleet, TrafficError};
 use blendtrack::path::wrap_angle;
 use blendtrack::{Fleet, FleetInputs, FleetOutputs, NextStates, VehicleState};
 use nalgebra::Point2;
@@ -296,19 +296,19 @@ impl RouteFleet {
         let d = self.driven[slot]
             .as_mut()
             .expect("planned slots are driven");
-        let mut state = state_at(next, i);
+        let state = state_at(next, i);
         let finite = stepped_finite(&state, out.s_rear_m[i]);
         let (v, th) = (state.v_mps, state.theta_rad);
         let reach = d.body.reach_m;
-        let (mut xf, mut yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());
+        let (xf, yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());
         // The front's arc length at the NEW state (the controller's
         // outputs are of the state it was given, one step behind).
-        let mut sf_new = if finite {
+        let sf_new = if finite {
             front_arc_after(&self.fleet, slot, d, Point2::new(xf, yf), v * dt_s)?
         } else {
             f64::NAN
         };
-        let mut k = if finite { d.route.piece_at(sf_new) } else { 0 };
+        let k = if finite { d.route.piece_at(sf_new) } else { 0 };
         let motion = Motion {
             usable: out.ok[i] && finite,
             lateral_error_m: out.lateral_error_m[i],
@@ -323,27 +323,7 @@ impl RouteFleet {
             },
         };
         let st = self.settings;
-        let mut p = choose_move(d, k, &st, &motion);
-        if p.mv == Move::Xy {
-            if let Some(ahead) = simulator_ahead(d, k, sf_new) {
-                // Never put back: the new state goes on to where the
-                // simulator has the front (see `simulator_ahead`).
-                state.x_m += ahead * th.cos();
-                state.y_m += ahead * th.sin();
-                (xf, yf) = (xf + ahead * th.cos(), yf + ahead * th.sin());
-                sf_new += ahead;
-                k = d.route.piece_at(sf_new);
-                p = choose_move(
-                    d,
-                    k,
-                    &st,
-                    &Motion {
-                        s_front_m: sf_new,
-                        ..motion
-                    },
-                );
-            }
-        }
+        let p = choose_move(d, k, &st, &motion);
         let piece = d.route.pieces[k];
         let mut red = false;
         let mut due = false;
@@ -463,35 +443,4 @@ fn crossed_red(signals: &[Vec<Signal>], d: &Driven, s_new: f64) -> bool {
             && stop.s_m <= s_new
             && signal_at(signals, stop) == Signal::Stop
     })
-}
-
-/// The most (m) a piece's track may lie off its lane's centreline for
-/// [`simulator_ahead`] to compare lane positions there.
-const CATCH_UP_OFFSET_M: f64 = 0.1;
-
-/// How far (m of track, `0 < x <= CATCH_UP_MAX_M`) the simulator has the
-/// front of `d` ahead of arc length `sf_new` on piece `k`'s lane, when it
-/// has it on that lane: a move by (x, y) there would put the vehicle back.
-/// A speed-only move lets the simulator run a little ahead of blendtrack's
-/// state (it is slowed, never put back: `placement::glide_move`), and at a
-/// crawl it stays ahead: at Eccles (seed 1, 370 s, `--corridor road`) a car
-/// creeping out of a junction was 1.2 m ahead in SUMO when its first (x, y)
-/// move put it 0.56 m back, onto the SUMO driver 0.16 m behind it, a
-/// collision. None otherwise.
-pub(crate) fn simulator_ahead(d: &Driven, k: usize, sf_new: f64) -> Option<f64> {
-    let (lane, at) = d.known?;
-    let piece = &d.route.pieces[k];
-    // Only where the track lies on the lane: where it cuts a corner
-    // (a rounded turn, a junction lane it leaves) SUMO's lane position runs
-    // ahead of the arc length by design (`Route::arc_gap`), and moved on to
-    // it, cars at Bologna crossed their stop lines on red.
-    if piece.lane != lane
-        || !sf_new.is_finite()
-        || !(piece.scale > 0.0)
-        || !(piece.offset_m <= CATCH_UP_OFFSET_M)
-    {
-        return None;
-    }
-    let ahead = (at - piece.lane_pos_at(sf_new)) / piece.scale;
-    (ahead > 0.0 && ahead <= CATCH_UP_MAX_M).then_some(ahead)
 }
