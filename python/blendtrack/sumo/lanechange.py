@@ -398,18 +398,14 @@ class LaneChanges:
 
     def alongside_on_target(self, vid: str, side: int, leaders: list[tuple[str, float]]) -> bool:
         """Is a vehicle alongside ``vid`` on the lane beside it (``side``: 1
-        right, 0 left): its body overlapping ``vid``'s along the road, or
-        within the minGap of it? ``getNeighbors`` gives such a leader
-        (``leaders``: its answer for that lane's leaders) or follower a gap
-        below 0 (the gaps leave the follower's minGap out), and SUMO counts a
-        gap under minGap as a collision once the changer is on that lane.
-        Counted only where the bodies overlapped, a change over several
-        lanes went on 0.4 m ahead of a car on the next lane (Eccles, 30 %,
-        seed 2, 515 s)."""
+        right, 0 left), its body overlapping ``vid``'s along the road?
+        ``getNeighbors`` gives such a leader (``leaders``: its answer for
+        that lane's leaders) a gap below minus ``vid``'s minGap, and such a
+        follower one below minus its own."""
         v = self.conn.sumo.vehicle
-        if any(gap < 0.0 for _, gap in leaders):
+        if any(gap < -float(v.getMinGap(vid)) for _, gap in leaders):
             return True
-        return any(gap < 0.0 for _, gap in v.getNeighbors(vid, side))
+        return any(gap < -float(v.getMinGap(other)) for other, gap in v.getNeighbors(vid, side))
 
     def abort_change(self, act: Active) -> None:
         """Back to the lane the vehicle is on, the change pending again (it is
