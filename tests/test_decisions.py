@@ -1441,30 +1441,6 @@ def test_room_on_the_far_lane_counts_a_vehicle_still_in_the_junction_before_it()
     assert lcs.room_on_lane("me", "e_2", 10.0, 0.0, 10.0)
 
 
-def test_a_change_over_several_lanes_needs_room_on_every_lane_it_crosses() -> None:
-    """A change from lane 0 to lane 4 crosses lanes 2, 3 and 4 after the
-    one beside (SUMO's model checks that one): a vehicle just ahead on any
-    of them stops it, on lane 1 (the model's) or on lane 5 (not crossed)
-    it does not. A change to the lane beside checks nothing more; to the
-    lane after, that lane alone, as before."""
-    conn = FakeConn()
-    v = conn.vehicle
-    v.add("me", pos=40.0, speed=14.0)
-    v.add("o", pos=47.0, speed=11.0)
-    lcs = lane_changes(conn)
-    for lane, clear in [(None, True), (1, True), (2, False), (3, False), (4, False), (5, True)]:
-        conn.lanes = {f"e_{k}": (["o"] if k == lane else []) for k in range(6)}
-        assert lcs.room_beyond("me", "e", 0, 4, 40.0, 14.0, 40.0) == clear, lane
-        # Right to left the same lanes, counted down.
-        assert lcs.room_beyond("me", "e", 5, 1, 40.0, 14.0, 40.0) == (lane not in (1, 2, 3)), lane
-    conn.lanes = {f"e_{k}": ["o"] for k in range(6)}
-    assert lcs.room_beyond("me", "e", 0, 1, 40.0, 14.0, 40.0)
-    conn.lanes = {"e_2": ["o"]}
-    assert not lcs.room_beyond("me", "e", 0, 2, 40.0, 14.0, 40.0)
-    conn.lanes = {"e_3": ["o"]}
-    assert lcs.room_beyond("me", "e", 0, 2, 40.0, 14.0, 40.0)
-
-
 def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(monkeypatch: pytest.MonkeyPatch) -> None:
     """A change the route needs, 0.8 m across (past giving up by its
     offset), SUMO still having the vehicle on the lane it leaves: a vehicle
