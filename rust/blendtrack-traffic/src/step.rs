@@ -309,6 +309,7 @@ impl RouteFleet {
             f64::NAN
         };
         let k = if finite { d.route.piece_at(sf_new) } else { 0 };
+        let piece = d.route.pieces[k];
         let motion = Motion {
             usable: out.ok[i] && finite,
             lateral_error_m: out.lateral_error_m[i],
@@ -324,7 +325,6 @@ impl RouteFleet {
         };
         let st = self.settings;
         let p = choose_move(d, k, &st, &motion);
-        let piece = d.route.pieces[k];
         let mut red = false;
         let mut due = false;
         if p.mv != Move::Invalid {

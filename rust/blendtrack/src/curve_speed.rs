@@ -153,54 +153,60 @@ fn preview_m(speed_abs: f64, b: f64, cfg: &ControllerConfig) -> f64 {
         + 1.0
 }
 
+/// Calls `visit(k, d)` for each sample `k` within `reach` (m of arc) of
+/// sample `i`, `d` its signed arc distance from it: `i` itself, then the
+/// samples behind it going back, then the ones ahead going on. A closed path
+/// wraps around (`length`), each sample met at most once.
+fn for_each_within(
+    s: &[f64],
+    i: usize,
+    reach: f64,
+    closed: bool,
+    length: f64,
+    mut visit: impl FnMut(usize, f64),
+) {
+    let n = s.len() as isize;
+    for dir in [-1isize, 1] {
+        let mut j = if dir < 0 { i as isize } else { i as isize + 1 };
+        while (closed || (0..n).contains(&j)) && (j - i as isize).abs() < n {
+            let k = j.rem_euclid(n) as usize;
+            let d = s[k] + j.div_euclid(n) as f64 * length - s[i];
+            if d.abs() > reach {
+                break;
+            }
+            visit(k, d);
+            j += dir;
+        }
+    }
+}
+
 /// `values` (one per arc length of `s`, increasing) averaged with a Gaussian
 /// of standard deviation `sigma` (m) along the arc, each sample weighted by
 /// the arc it stands for (half the distance to each neighbour), out to
 /// `3 sigma`; a closed path wraps around (`length`).
 fn gaussian_mean(s: &[f64], values: &[f64], sigma: f64, closed: bool, length: f64) -> Vec<f64> {
     let n = s.len();
-    let reach = 3.0 * sigma;
-    let at = |j: isize| -> (f64, f64) {
-        // (arc length unwrapped around the vertex asked from, value)
-        let k = j.rem_euclid(n as isize) as usize;
-        let laps = j.div_euclid(n as isize) as f64;
-        (s[k] + laps * length, values[k])
-    };
-    let span = |j: isize| -> f64 {
-        if !closed && (j == 0 || j == n as isize - 1) {
-            let (a, b) = if j == 0 { (0, 1) } else { (n - 2, n - 1) };
-            return 0.5 * (s[b] - s[a]);
-        }
-        0.5 * (at(j + 1).0 - at(j - 1).0)
-    };
-    (0..n as isize)
+    let span: Vec<f64> = (0..n)
+        .map(|k| match (k, closed) {
+            (0, false) => 0.5 * (s[1] - s[0]),
+            (k, false) if k == n - 1 => 0.5 * (s[n - 1] - s[n - 2]),
+            (0, true) => 0.5 * (s[1] - (s[n - 1] - length)),
+            (k, true) if k == n - 1 => 0.5 * (s[0] + length - s[n - 2]),
+            (k, _) => 0.5 * (s[k + 1] - s[k - 1]),
+        })
+        .collect();
+    (0..n)
         .map(|i| {
-            let si = s[i as usize];
             let (mut num, mut den) = (0.0, 0.0);
-            for dir in [-1isize, 1] {
-                let mut j = if dir < 0 { i } else { i + 1 };
-                loop {
-                    if !closed && (j < 0 || j >= n as isize) {
-                        break;
-                    }
-                    if closed && (j - i).unsigned_abs() >= n {
-                        break;
-                    }
-                    let (sj, v) = at(j);
-                    let d = sj - si;
-                    if d.abs() > reach {
-                        break;
-                    }
-                    let w = (-0.5 * (d / sigma).powi(2)).exp() * span(j);
-                    num += w * v;
-                    den += w;
-                    j += dir;
-                }
-            }
+            for_each_within(s, i, 3.0 * sigma, closed, length, |k, d| {
+                let w = (-0.5 * (d / sigma).powi(2)).exp() * span[k];
+                num += w * values[k];
+                den += w;
+            });
             if den > 0.0 {
                 num / den
             } else {
-                values[i as usize]
+                values[i]
             }
         })
         .collect()
@@ -209,24 +215,12 @@ fn gaussian_mean(s: &[f64], values: &[f64], sigma: f64, closed: bool, length: f6
 /// The largest of `values` within `reach` (m of arc) of each sample (a
 /// closed path wraps around).
 fn sliding_max(s: &[f64], values: &[f64], reach: f64, closed: bool, length: f64) -> Vec<f64> {
-    let n = s.len();
-    (0..n)
+    (0..s.len())
         .map(|i| {
             let mut best = values[i];
-            for dir in [-1isize, 1] {
-                for step in 1..n {
-                    let j = i as isize + dir * step as isize;
-                    if !closed && (j < 0 || j >= n as isize) {
-                        break;
-                    }
-                    let k = j.rem_euclid(n as isize) as usize;
-                    let laps = j.div_euclid(n as isize) as f64;
-                    if (s[k] + laps * length - s[i]).abs() > reach {
-                        break;
-                    }
-                    best = best.max(values[k]);
-                }
-            }
+            for_each_within(s, i, reach, closed, length, |k, _| {
+                best = best.max(values[k])
+            });
             best
         })
         .collect()
