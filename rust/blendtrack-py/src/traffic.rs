@@ -364,6 +364,13 @@ impl RouteFleet {
             .map_err(traffic_error)
     }
 
+    /// Moves the vehicle's state ``by_m`` metres on along its heading (0 to
+    /// 5 m), before a ``retrack`` onto a lane change, to where SUMO has its
+    /// front; ValueError out of range.
+    fn advance_state(&mut self, slot: i64, by_m: f64) -> PyResult<()> {
+        self.inner.advance_state(slot, by_m).map_err(traffic_error)
+    }
+
     /// Which time the track drives the edge of the vehicle's front (see
     /// `add_vehicle`'s `occurrence`): SUMO's route index of the vehicle,
     /// less that of the track's first edge, where blendtrack has it.
