@@ -508,6 +508,23 @@ def test_wait_for_gap_lines_up_behind_the_tighter_neighbour() -> None:
     assert lcs._merge_leads == {}
 
 
+def test_a_lane_change_starts_where_sumo_has_the_front_when_it_is_a_little_ahead() -> None:
+    """``sumo_ahead``: SUMO's front on the same lane up to 5 m ahead of
+    blendtrack's is where the change starts; behind it, further ahead (a
+    lost vehicle), on another lane or gone, nothing moves."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="e_1", pos=32.2)
+    lcs = lane_changes(conn)
+    assert abs(lcs.sumo_ahead("me", "e_1", 30.0) - 2.2) < EPS
+    assert lcs.sumo_ahead("me", "e_1", 32.2) == 0.0
+    assert lcs.sumo_ahead("me", "e_1", 33.0) == 0.0, "SUMO behind: never moved back"
+    assert lcs.sumo_ahead("me", "e_1", 32.2 - 5.0 - 1e-6) == 0.0, "more than 5 m: a lost vehicle"
+    assert abs(lcs.sumo_ahead("me", "e_1", 32.2 - 5.0 + 1e-6) - (5.0 - 1e-6)) < EPS
+    assert lcs.sumo_ahead("me", "e_0", 30.0) == 0.0, "on another lane"
+    assert lcs.sumo_ahead("gone", "e_1", 30.0) == 0.0
+
+
 # ------------------------------------------------------------ junctions
 def junctions(conn: FakeConn, foes: list[tuple[Any, ...]], plan_decel: float = 4.0,
               crossing: tuple[float, float] | None = None, shapes: dict[str, np.ndarray] | None = None) -> Junctions:
@@ -1863,6 +1880,7 @@ def test_a_change_waits_for_a_driver_joining_the_target_lane_from_beyond() -> No
     assert not joining()
     lcs.active["far"] = SimpleNamespace(vid="far", changing=(-1, 1))  # type: ignore[assignment]
     assert joining()
+
 
 
 def test_a_controlled_foe_is_known_by_its_track_wherever_sumo_has_it() -> None:
