@@ -740,16 +740,19 @@ mod tests {
         assert!(top <= 20.0 + 1e-9 && top > 19.0, "{top}");
     }
 
+    /// A fleet on the test road, with a second track of the same road.
+    fn fleet_on_two_tracks() -> (RouteFleet, i64, i64) {
+        let (mut f, t) = fleet_on(road(None, true));
+        let (path, route) = road(None, true);
+        let t2 = f
+            .add_route(path, ControllerConfig::default(), route)
+            .unwrap() as i64;
+        (f, t, t2)
+    }
+
     #[test]
     fn retrack_keeps_state_and_statistics() {
-        let (mut f, t) = fleet_on(road(None, true));
-        let t2 = f
-            .add_route(
-                road(None, true).0,
-                ControllerConfig::default(),
-                road(None, true).1,
-            )
-            .unwrap() as i64;
+        let (mut f, t, t2) = fleet_on_two_tracks();
         let a = f
             .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;
@@ -784,14 +787,7 @@ mod tests {
     fn advance_state_moves_the_state_on_along_its_heading_then_retrack_finds_the_front() {
         // The test road runs along x: 2.5 m on is 2.5 m of x and of the
         // front's arc length once retracked; out of range changes nothing.
-        let (mut f, t) = fleet_on(road(None, true));
-        let t2 = f
-            .add_route(
-                road(None, true).0,
-                ControllerConfig::default(),
-                road(None, true).1,
-            )
-            .unwrap() as i64;
+        let (mut f, t, t2) = fleet_on_two_tracks();
         let a = f
             .add_vehicle(t, None, None, body(), at(50.0, 1.0), None)
             .unwrap() as i64;
