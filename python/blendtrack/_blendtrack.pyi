@@ -15,6 +15,7 @@ __all__ = [
     "__version__",
     "MAX_SIM_STEPS",
     "HOLD_BRAKING_MIN_STEP_S",
+    "ADVANCE_MAX_M",
     "BlendtrackError",
     "ConfigError",
     "PathError",
@@ -44,6 +45,8 @@ MAX_SIM_STEPS: int
 #: within the step (a braking one at its mean speed, one it drives with its own control steps, one the
 #: simulator drives at its stop point); the SUMO bridge uses the same bound.
 HOLD_BRAKING_MIN_STEP_S: float
+#: The most (m) ``RouteFleet.advance_state`` moves a vehicle on (more is a lost vehicle, not a lag).
+ADVANCE_MAX_M: float
 
 _F64 = npt.NDArray[np.float64]
 _ArrayLike = npt.ArrayLike

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from typing import Any
 
 import blendtrack
+from blendtrack._blendtrack import ADVANCE_MAX_M
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.geometry import RouteGeometry
 from blendtrack.sumo.network import Network
@@ -42,10 +43,10 @@ LANE_CHANGE_S = 2.0
 LANE_CHANGE_MIN_M = 10.0
 LANE_CHANGE_MAX_M = 60.0
 # A lane change starts where SUMO has the vehicle's front when SUMO has it
-# ahead of blendtrack by up to this much (m; ``LaneChanges.sumo_ahead``,
-# ``RouteFleet.advance_state``'s bound). Further is a lost vehicle, which
-# the placement check hands back.
-CATCH_UP_MAX_M = 5.0
+# ahead of blendtrack by up to this much (m; ``LaneChanges.sumo_ahead``):
+# ``RouteFleet.advance_state``'s bound. Further is a lost vehicle, which the
+# placement check hands back.
+CATCH_UP_MAX_M = ADVANCE_MAX_M
 # A lane change whose vehicle is still within this distance (m) of its lane's
 # centre is checked again every step and given up when the room has gone.
 ABORT_CHANGE_LAT_M = 0.5

@@ -41,6 +41,7 @@ fn _blendtrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
         "HOLD_BRAKING_MIN_STEP_S",
         blendtrack_traffic::HOLD_BRAKING_MIN_STEP_S,
     )?;
+    m.add("ADVANCE_MAX_M", blendtrack_traffic::ADVANCE_MAX_M)?;
     errors::register(m)?;
     m.add_class::<path::Path>()?;
     m.add_class::<config::ControllerConfig>()?;
