@@ -1882,7 +1882,6 @@ def test_a_change_waits_for_a_driver_joining_the_target_lane_from_beyond() -> No
     assert joining()
 
 
-
 def test_a_controlled_foe_is_known_by_its_track_wherever_sumo_has_it() -> None:
     """Bologna's 39a in small: "me" (slot 0) stands 1 m before its line on
     the minor road; the major way ":m_0_0" crosses its way 4 m into it,

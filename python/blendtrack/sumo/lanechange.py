@@ -42,11 +42,6 @@ FAR_SIDE_HOLD_S = 1.0
 LANE_CHANGE_S = 2.0
 LANE_CHANGE_MIN_M = 10.0
 LANE_CHANGE_MAX_M = 60.0
-# A lane change starts where SUMO has the vehicle's front when SUMO has it
-# ahead of blendtrack by up to this much (m; ``LaneChanges.sumo_ahead``):
-# ``RouteFleet.advance_state``'s bound. Further is a lost vehicle, which the
-# placement check hands back.
-CATCH_UP_MAX_M = ADVANCE_MAX_M
 # A lane change whose vehicle is still within this distance (m) of its lane's
 # centre is checked again every step and given up when the room has gone.
 ABORT_CHANGE_LAT_M = 0.5
@@ -524,8 +519,9 @@ class LaneChanges:
     def sumo_ahead(self, vid: str, lane_id: str, pos: float) -> float:
         """How far (m) SUMO has ``vid``'s front ahead of lane position
         ``pos`` on ``lane_id`` (where blendtrack has it after this step's
-        movement), when it has it on that lane up to ``CATCH_UP_MAX_M``
-        ahead; else 0. A stop-and-go crawl's speed-only moves let SUMO run
+        movement), when it has it on that lane up to ``ADVANCE_MAX_M``
+        ahead (``RouteFleet.advance_state``'s bound: further is a lost
+        vehicle, which the placement check hands back); else 0. A stop-and-go crawl's speed-only moves let SUMO run
         on, and a lane change begun from blendtrack's state moved the car
         back onto the one behind it (Eccles, 30 %, seed 0, 459 s and
         seed 1, 576 s: 2.2-3 m back in the change's first step, a collision
@@ -536,7 +532,7 @@ class LaneChanges:
             ahead = float(self.conn.get_lane_pos(vid)) - pos
         except self.conn.errors:
             return 0.0
-        return ahead if 0.0 < ahead <= CATCH_UP_MAX_M else 0.0
+        return ahead if 0.0 < ahead <= ADVANCE_MAX_M else 0.0
 
     def wait_for_gap(self, vid: str, direction: int, target_lane: str, pos: float, speed: float, urgent: bool = True) -> None:
         """``vid`` has a lane change due and no room yet: it keeps behind the
