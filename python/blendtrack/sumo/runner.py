@@ -205,6 +205,7 @@ class SumoRun:
         # subscriptions then keep the state the step ran under.
         self.conn.subscribe_lights = bool(self.step_hooks)
         self.conn.start()
+        self.fleet.ballistic = self._ballistic()
         self.remote_collisions = RemoteCollisions(self.conn.sumo.vehicle, *self._collision_options(), self.conn.sumo.lane,
                                                   self.network.ways_from)
         completed = False
@@ -231,6 +232,19 @@ class SumoRun:
         except Exception:
             return ""
 
+    def _ballistic(self) -> bool:
+        """Does SUMO move vehicles by the ballistic update
+        (``--step-method.ballistic``, in the scenario's configuration or
+        ``--sumo-args``)? A speed sent then carries a vehicle the mean of
+        its old and new speed over the step, not the new one: the
+        RouteFleet works its moves out for that. Without it (Euler, SUMO's
+        default) a Bologna run at 30 % had 240 collisions with a controlled
+        vehicle instead of 1 (seed 0, 600 s)."""
+        try:
+            return str(self.conn.sumo.simulation.getOption("step-method.ballistic")).lower() == "true"
+        except Exception:
+            return False  # an older SUMO without getOption: its default
+
     def _collision_options(self) -> tuple[str, float]:
         """SUMO's ``collision.action`` and ``collision.mingap-factor`` ("" and -1 if not to be read)."""
         try:
@@ -251,6 +265,7 @@ class SumoRun:
             "steps": steps,
             "step_length_s": self.conn.dt,
             "control_dt_s": self.opt.control_dt_s,
+            "ballistic_update": self.fleet.ballistic,
             "controlled_vehicles": totals.vehicles,
             "background_vehicles": self._background,
             "collisions": counts["collision_events"],

@@ -139,6 +139,7 @@ impl RouteFleet {
             sample_every,
             verify_every,
             control_dt_s,
+            ballistic: false,
         })
         .map_err(|e| match e {
             TrafficError::Parameter {
@@ -860,6 +861,19 @@ impl RouteFleet {
     #[setter]
     fn set_threads(&mut self, threads: usize) {
         self.inner.set_threads(threads);
+    }
+
+    /// Whether the simulator moves a vehicle over a step at the mean of
+    /// its speeds at the step's start and end (SUMO's
+    /// `--step-method.ballistic`) rather than at its new speed (False, the
+    /// default): speed-only and lane-position moves are worked out for it.
+    #[getter]
+    fn ballistic(&self) -> bool {
+        self.inner.settings().ballistic
+    }
+    #[setter]
+    fn set_ballistic(&mut self, ballistic: bool) {
+        self.inner.set_ballistic(ballistic);
     }
 
     fn __len__(&self) -> usize {

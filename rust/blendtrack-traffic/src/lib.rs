@@ -154,6 +154,12 @@ pub struct TrafficSettings {
     /// over `dt / n` each, with leaders and stop lines held for the step
     /// (see the module docs); `control_dt >= dt` gives one control step.
     pub control_dt_s: f64,
+    /// How the simulator moves a vehicle over a step it was sent a speed
+    /// for: false, at that speed (SUMO's default, semi-implicit Euler);
+    /// true, at the mean of its speeds at the step's start and end (SUMO's
+    /// `--step-method.ballistic`). Speed-only and lane-position moves are
+    /// worked out for it ([`RouteFleet::set_ballistic`]).
+    pub ballistic: bool,
 }
 
 impl Default for TrafficSettings {
@@ -171,6 +177,7 @@ impl Default for TrafficSettings {
             sample_every: 10,
             verify_every: 10,
             control_dt_s: 0.05,
+            ballistic: false,
         }
     }
 }
@@ -272,6 +279,12 @@ impl RouteFleet {
 
     pub fn settings(&self) -> &TrafficSettings {
         &self.settings
+    }
+    /// Whether the simulator's position update is ballistic (see
+    /// [`TrafficSettings::ballistic`]): the bridge knows only once the
+    /// simulator runs.
+    pub fn set_ballistic(&mut self, ballistic: bool) {
+        self.settings.ballistic = ballistic;
     }
     pub fn fleet(&self) -> &Fleet {
         &self.fleet
