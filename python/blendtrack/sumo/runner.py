@@ -658,8 +658,14 @@ class SumoRun:
         if len(due):
             v = out["v_mps"][due]
             # Where SUMO will have the front after its movement over the step:
-            # the new front position (lane_pos_m is it minus v dt).
-            front = (out["lane_pos_m"][due] + v * self.conn.dt).tolist()
+            # the new front position (lane_pos_m is it minus v dt; under the
+            # ballistic update a lane-position move's is it minus the mean
+            # of two speeds times dt, so the front is read from the fleet).
+            if self.fleet.ballistic:
+                where = self.fleet.front_lane_position
+                front = [where(acts[i].slot)[1] for i in due.tolist()]
+            else:
+                front = (out["lane_pos_m"][due] + v * self.conn.dt).tolist()
             self.lanes.due = [
                 (ids[i], lane, pos, sp) for i, lane, pos, sp in zip(due.tolist(), out["lane"][due].tolist(), front, v.tolist())
             ]
