@@ -189,11 +189,12 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
     // far, into the vehicle ahead (Eccles).
     // (That lane distance over the step is a mean speed: the speed that
     // has a ballistic move cover it ends the step at about the vehicle's.)
+    let prev = sim_speed(d);
     let expect = match glide {
         Some((_, true)) => {
             crossing_lane_speed(route, k, target, d.s_front_m, dt_s).map_or(v, |mean| {
                 if st.ballistic {
-                    speed_for(true, sim_speed(d), mean * dt_s, dt_s).max(0.0)
+                    speed_for(true, prev, mean * dt_s, dt_s).max(0.0)
                 } else {
                     mean
                 }
@@ -203,7 +204,7 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
     };
     // Placed by lane position, the simulator then moves the front over the
     // step at the speed sent.
-    let moved = sim_displacement(st.ballistic, sim_speed(d), v, dt_s);
+    let moved = sim_displacement(st.ballistic, prev, v, dt_s);
     let lane_ok =
         on_lane && target - moved >= d.body.length_m && !laps_back_onto_the_lane_before(d, k);
     p.mv = if !m.usable {
@@ -216,7 +217,7 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
         // after the simulator removed the vehicle.
         Move::Speed
     } else if let Some((dist, cross)) = glide.filter(|&(dist, _)| {
-        dist - sim_displacement(st.ballistic, sim_speed(d), expect, dt_s) <= GLIDE_BEHIND_M
+        dist - sim_displacement(st.ballistic, prev, expect, dt_s) <= GLIDE_BEHIND_M
     }) {
         // Room to the end of the lane the simulator has the front on, when
         // the new place is on that lane: a speed-only move stays on it.
@@ -227,12 +228,20 @@ pub(crate) fn choose_move(d: &Driven, k: usize, st: &TrafficSettings, m: &Motion
         // Nor past the leader's back as it stood at the start of the step,
         // unless blendtrack's own move goes there (a leader moving off).
         let room = room.min(dist.max(m.leader_room_m) + LANE_END_MARGIN_M);
-        let glide = glide_move(d, st.ballistic, &mut p, expect, (dist, room), cross, dt_s);
+        let glide = glide_move(
+            d,
+            (st.ballistic, prev),
+            &mut p,
+            expect,
+            (dist, room),
+            cross,
+            dt_s,
+        );
         if st.ballistic
             && lane_ok
             && !cross
             && dist >= 0.0
-            && sim_displacement(true, sim_speed(d), p.sumo_speed, dt_s) > dist + BALLISTIC_AHEAD_M
+            && sim_displacement(true, prev, p.sumo_speed, dt_s) > dist + BALLISTIC_AHEAD_M
         {
             // A ballistic move covers at least half the speed the simulator
             // has, whatever speed >= 0 it is sent, and the mean of the two
@@ -316,10 +325,12 @@ fn crossing_lane_speed(route: &Route, k: usize, target: f64, s_old: f64, dt_s: f
 /// (its own speed at the end of the step, 1.2 m/s, less the tolerance)
 /// where blendtrack moved it 0.32 m, and SUMO called the 1.08 m a
 /// collision (Bologna, 203[0], seed 2 at 185 s).
-/// [`Move::Hold`] when the speed it has will do.
+/// [`Move::Hold`] when the speed it has will do. `ballistic`, `prev`: the
+/// simulator's position update and the speed it has the vehicle at
+/// ([`sim_speed`]).
 fn glide_move(
     d: &Driven,
-    ballistic: bool,
+    (ballistic, prev): (bool, f64),
     p: &mut Placement,
     expect: f64,
     (dist, room): (f64, f64),
@@ -327,7 +338,6 @@ fn glide_move(
     dt_s: f64,
 ) -> Move {
     let tol = GLIDE_TOLERANCE_MPS + GLIDE_TOLERANCE_REL * expect;
-    let prev = sim_speed(d);
     p.sumo_speed =
         speed_for(ballistic, prev, dist, dt_s).clamp((expect - tol).max(0.0), expect + tol);
     if sim_displacement(ballistic, prev, p.sumo_speed, dt_s) > room - LANE_END_MARGIN_M {
@@ -729,7 +739,15 @@ mod tests {
                 sumo_speed: f64::NAN,
                 predicted: None,
             };
-            let mv = glide_move(&d, false, &mut p, dist, (dist, f64::INFINITY), false, 1.0);
+            let mv = glide_move(
+                &d,
+                (false, sim_speed(&d)),
+                &mut p,
+                dist,
+                (dist, f64::INFINITY),
+                false,
+                1.0,
+            );
             (mv, p.sumo_speed, p.predicted)
         };
         let (mv, speed, predicted) = glide(HOLD_SPEED_MPS);
