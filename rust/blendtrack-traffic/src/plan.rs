@@ -313,17 +313,23 @@ fn decide_stop(
             }
         }
         Signal::Priority | Signal::Yield => {
-            // A link without priority is asked about from where the vehicle
-            // could still stop for it (reaction time at its speed, braking
-            // at its planning deceleration) plus the look-ahead: asked from
-            // the look-ahead alone, a vehicle at 13.9 m/s (it needs 38 m)
-            // was never asked and crossed a busy major road at speed.
-            let reach = if sig == Signal::Yield {
-                st.yield_lookahead_m + stopping_distance(cfg, v)
-            } else {
-                st.yield_lookahead_m
-            };
-            let near = gap < reach;
+            // A link is asked about from where the vehicle could still stop
+            // for it (reaction time at its speed, braking at its planning
+            // deceleration) plus the look-ahead: asked from the look-ahead
+            // alone, a vehicle at 13.9 m/s (it needs 38 m) was never asked
+            // and crossed a busy major road at speed. The same holds for a
+            // link with priority whose way inside the junction is checked
+            // for bodies in it: at 13.5 m/s a controlled car was never
+            // asked, and ran into a left turner standing at its waiting
+            // point across the shared start of the two ways (Bologna,
+            // junction 50, seed 10).
+            let ask_reach = st.yield_lookahead_m + stopping_distance(cfg, v);
+            let near = gap
+                < if sig == Signal::Yield {
+                    ask_reach
+                } else {
+                    st.yield_lookahead_m
+                };
             let held = d.holding == Some(next);
             // A standing leader (below SUMO's halting speed) whose back
             // leaves no room for the vehicle beyond the junction's exit. A
@@ -342,7 +348,7 @@ fn decide_stop(
                 dec.stop_gap = gap;
                 dec.holding = Some(next);
             } else if (sig == Signal::Yield || stop.check_inside)
-                && near
+                && gap < ask_reach
                 && (held || can_stop(cfg, v, gap))
             {
                 // Give way while the simulator reports foes (or,
@@ -529,6 +535,34 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_fast_vehicle_asks_about_a_junction_checked_for_vehicles_inside_while_it_can_stop() {
+        // At 19 m/s the vehicle needs more than the 30 m look-ahead to stop
+        // (its reaction time, then its planning deceleration). Asked only
+        // within the look-ahead, where it can no longer stop, it was never
+        // asked, and drove through a junction with a car standing across
+        // its way: asked from where it can still stop, it waits.
+        let (path, mut route) = road(None, true);
+        route.stops[0].check_inside = true;
+        let (mut f, t) = fleet_on((path, route));
+        let v = 19.0;
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(60.0, v), None)
+            .unwrap() as i64;
+        let cfg = f.fleet.vehicle_config(slot).unwrap();
+        assert!(super::stopping_distance(cfg, v) > TrafficSettings::default().yield_lookahead_m);
+        let mut asked = 0;
+        for _ in 0..300 {
+            asked += step(&mut f, &[slot], true).0.len();
+        }
+        assert!(asked > 0);
+        let sf = f.s_front(slot).unwrap();
+        assert!(
+            sf < 200.0 && f.state(slot).unwrap().v_mps.abs() < 0.05,
+            "waits at the line: front {sf}"
+        );
     }
 
     #[test]
