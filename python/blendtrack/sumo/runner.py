@@ -160,6 +160,10 @@ class SumoRun:
         self.remote_collisions = RemoteCollisions(None, "", -1.0)
         self.remote_found: list[tuple[float, str, str, str, str, str]] = []
         self._seen: set[str] = set()
+        #: Selected vehicles whose control point was more than their lane's
+        #: width behind the start of their lane at departure, taken over once
+        #: it is on the lane (``Controlled.behind_track``).
+        self._deferred: set[str] = set()
         #: Vehicles left to SUMO (not selected, or not drivable).
         self._background = 0
         #: Control steps so far.
@@ -352,6 +356,7 @@ class SumoRun:
             remote.forget(vid)
             self._drop(vid, t, "arrived")
             self._seen.discard(vid)
+            self._deferred.discard(vid)
             self.sumo_leaders.forget(vid)
         teleporting = ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ())
         self.incidents.teleports(teleporting, self.active)
@@ -386,17 +391,38 @@ class SumoRun:
             if self.opt.tactical_lane_changes:
                 self.lanes.note_insertion(vid)
             vtype = sumo.vehicle.getTypeID(vid)
-            if self.selection.is_selected(vid, vtype, self.vehicles.taken):
-                try:
-                    self.vehicles.take_over(vid, t)
-                    if vid in self.active:
-                        self.stops.take_over(self.active[vid])
-                except blendtrack.PathError:
-                    # An undrivable route: leave it to SUMO, and say so.
-                    self.counts["takeover_failures"] += 1
-                    self._background += 1
+            if self.selection.is_selected(vid, vtype, self.vehicles.taken + len(self._deferred)):
+                if self.vehicles.behind_track(vid, self.placement.lane_width(self.conn.get_lane_id(vid))):
+                    self._deferred.add(vid)
+                else:
+                    self._take_over(vid, t)
             else:
                 self._background += 1
+        for vid in list(self._deferred):
+            if vid in ev.get(tc.VAR_DEPARTED_VEHICLES_IDS, ()):
+                continue
+            try:
+                wait = self.vehicles.behind_track(vid)
+            except self.conn.errors:
+                # Gone without an arrival (teleported, removed): SUMO's.
+                self._deferred.discard(vid)
+                self._background += 1
+                continue
+            if not wait:
+                self._deferred.discard(vid)
+                self._take_over(vid, t)
+
+    def _take_over(self, vid: str, t: float) -> None:
+        """Selected ``vid`` is driven by blendtrack from now on (or, for an
+        undrivable route, left to SUMO and counted)."""
+        try:
+            self.vehicles.take_over(vid, t)
+            if vid in self.active:
+                self.stops.take_over(self.active[vid])
+        except blendtrack.PathError:
+            # An undrivable route: leave it to SUMO, and say so.
+            self.counts["takeover_failures"] += 1
+            self._background += 1
 
     def _control_step(self, t: float) -> None:
         """Observe, then plan and step, then apply."""
