@@ -160,12 +160,6 @@ class SumoRun:
         self.remote_collisions = RemoteCollisions(None, "", -1.0)
         self.remote_found: list[tuple[float, str, str, str, str, str]] = []
         self._seen: set[str] = set()
-        #: Selected vehicles whose control point was more than their lane's
-        #: width behind the start of their lane at departure, taken over once
-        #: it is on the lane (``Controlled.behind_track``), in the order they
-        #: departed (a dict: a set's order of strings changes from process
-        #: to process).
-        self._deferred: dict[str, None] = {}
         #: Vehicles left to SUMO (not selected, or not drivable).
         self._background = 0
         #: Control steps so far.
@@ -358,7 +352,6 @@ class SumoRun:
             remote.forget(vid)
             self._drop(vid, t, "arrived")
             self._seen.discard(vid)
-            self._deferred.pop(vid, None)
             self.sumo_leaders.forget(vid)
         teleporting = ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ())
         self.incidents.teleports(teleporting, self.active)
@@ -386,8 +379,6 @@ class SumoRun:
         for vid in colliding:
             if vid in self.active:
                 self._drop(vid, t, "collision")
-        # Deferred in an earlier step: looked at again after this step's departures.
-        earlier = list(self._deferred)
         for vid in ev.get(tc.VAR_DEPARTED_VEHICLES_IDS, ()):
             if vid in self._seen:
                 continue
@@ -395,24 +386,10 @@ class SumoRun:
             if self.opt.tactical_lane_changes:
                 self.lanes.note_insertion(vid)
             vtype = sumo.vehicle.getTypeID(vid)
-            if self.selection.is_selected(vid, vtype, self.vehicles.taken + len(self._deferred)):
-                if self.vehicles.behind_track(vid, self.placement.lane_width(self.conn.get_lane_id(vid))):
-                    self._deferred[vid] = None
-                else:
-                    self._take_over(vid, t)
+            if self.selection.is_selected(vid, vtype, self.vehicles.taken):
+                self._take_over(vid, t)
             else:
                 self._background += 1
-        for vid in earlier:
-            try:
-                wait = self.vehicles.behind_track(vid)
-            except self.conn.errors:
-                # Gone without an arrival (teleported, removed): SUMO's.
-                del self._deferred[vid]
-                self._background += 1
-                continue
-            if not wait:
-                del self._deferred[vid]
-                self._take_over(vid, t)
 
     def _take_over(self, vid: str, t: float) -> None:
         """Selected ``vid`` is driven by blendtrack from now on (or, for an

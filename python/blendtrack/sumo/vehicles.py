@@ -182,28 +182,6 @@ class Controlled:
         overhang = max(0.5 * (info["length"] - veh.wheelbase_m), 0.0)
         return veh.wheelbase_m + overhang
 
-    def behind_track(self, vid: str, lane_width: float | None = None) -> bool:
-        """Is the control point of ``vid`` (SUMO's, departed: its rear axle
-        plus alpha times the wheelbase, alpha 1 for Stanley, 0 for pure
-        pursuit) behind the start of its lane, where its track starts, by
-        more than ``lane_width`` (None: at all)? Taken over there, its
-        lateral error is its distance to the track's first point: a 12 m
-        bus inserted with its front at its lane's start (Bologna's
-        ``departPos="0"``) had 6 m, more than its lane's width, and was
-        handed back at once as a placement fault (44 buses over seeds
-        0-35). Such a vehicle is left to SUMO until the point is on the
-        lane. Raises the connection's errors for a vehicle SUMO no longer
-        has."""
-        v = self.conn.sumo.vehicle
-        pos = float(v.getLanePosition(vid))
-        info = self.selection.type_info(v.getTypeID(vid))
-        veh: VehicleParams = info["vehicle"]
-        cfg: ControllerConfig = info["config"]
-        kind = str(cfg.lateral_controller)
-        alpha = 1.0 if kind == "stanley" else 0.0 if kind == "pure_pursuit" else float(cfg.lat_blend_factor)
-        behind = self._reach(info, veh) - alpha * veh.wheelbase_m - pos
-        return behind > (0.0 if lane_width is None else lane_width)
-
     def take_over(self, vid: str, t: float) -> None:
         """``vid`` (departed, selected) is driven by blendtrack from now on."""
         v = self.conn.sumo.vehicle

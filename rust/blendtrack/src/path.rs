@@ -726,11 +726,21 @@ impl Path {
             Vector2::new(heading.cos(), heading.sin())
         };
         let c = cross(&side_dir, &rel);
-        let lateral = if c >= 0.0 {
-            dist2.sqrt()
-        } else {
-            -dist2.sqrt()
-        };
+        let lateral =
+            if !self.closed && ((k == 0 && t <= 0.0) || (k + 1 == self.segs.len() && t >= g.len)) {
+                // Before an open path's start or past its end: the distance
+                // from the line the end segment extends, not from the end
+                // point. A car SUMO inserts with its front at its lane's start
+                // has its rear axle 2.5 m behind the track's first point; as the
+                // distance to that point it got a 2.5 m "lateral error" of
+                // either sign (the cross product of two nearly parallel
+                // vectors) and swerved to make it up.
+                cross(&g.dir, &rel)
+            } else if c >= 0.0 {
+                dist2.sqrt()
+            } else {
+                -dist2.sqrt()
+            };
         let s = self.foot_s(k, t);
         Projection {
             s,
@@ -1369,6 +1379,40 @@ mod tests {
             (pr.lateral_m + 1.5).abs() < 1e-12,
             "right of the path is negative"
         );
+    }
+
+    #[test]
+    fn beyond_an_open_paths_ends_the_lateral_error_is_from_the_extended_end_segment() {
+        // An L: (0,0) -> (10,0) -> (10,10). Behind the start and past the
+        // end the foot is the end point (s clamped), and the lateral error
+        // is the distance from the end segment's line, not from the point.
+        let p = Path::new(&[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]], None, false).unwrap();
+        for (q, s, lat) in [
+            ((-2.5, 0.0), 0.0, 0.0),
+            ((-2.5, 0.4), 0.0, 0.4),
+            ((-2.5, -0.4), 0.0, -0.4),
+            ((10.0, 13.0), 20.0, 0.0),
+            ((9.5, 13.0), 20.0, 0.5),
+        ] {
+            for pr in [
+                p.project(&Point2::new(q.0, q.1)),
+                p.project_brute_force(&Point2::new(q.0, q.1)),
+                p.project_near(&Point2::new(q.0, q.1), s),
+            ] {
+                assert!((pr.s - s).abs() < 1e-12, "{q:?}: s {}", pr.s);
+                assert!(
+                    (pr.lateral_m - lat).abs() < 1e-12,
+                    "{q:?}: lateral {}",
+                    pr.lateral_m
+                );
+            }
+        }
+        // The outer corner of an interior vertex keeps the distance to it.
+        let pr = p.project(&Point2::new(11.0, -1.0));
+        assert!((pr.lateral_m.abs() - 2f64.sqrt()).abs() < 1e-12);
+        // A closed path has no ends.
+        let c = Path::new(&[[0.0, 0.0], [10.0, 0.0], [10.0, 10.0]], None, true).unwrap();
+        assert!(c.project(&Point2::new(-1.0, -1.0)).lateral_m.abs() > 1.0);
     }
 
     #[test]
