@@ -479,6 +479,45 @@ mod tests {
     }
 
     #[test]
+    fn a_crawl_moved_by_xy_is_never_put_back_behind_the_simulator() {
+        // 0.6 m off its lane's centreline: moved by (x, y). The simulator
+        // has the front `ahead` m further on lane 10 than blendtrack: at a
+        // crawl (1 m/s) the new front goes at least there (up to 5 m;
+        // further is a lost vehicle, left to the placement check), and the
+        // state with it; at 5 m/s it is placed where blendtrack has it.
+        for (speed, ahead, caught) in [
+            (1.0, 1.0, true),
+            (1.0, 4.9, true),
+            (1.0, 0.0, false),
+            (1.0, 5.5, false),
+            (5.0, 1.0, false),
+        ] {
+            let (mut f, t) = fleet_on(road(None, true));
+            let mut st = at(50.0, speed);
+            st.y_m = 0.6;
+            let a = f.add_vehicle(t, None, None, body(), st, None).unwrap() as i64;
+            let sf = f.s_front(a).unwrap();
+            plan_one(&mut f, a, (f64::NAN, f64::NAN), (10, sf + ahead));
+            let out = f.step(&[], DT).unwrap();
+            assert_eq!(out.moves, [Move::Xy]);
+            let front = out.x_front_m[0];
+            if caught {
+                assert!(
+                    (front - (sf + ahead)).abs() < 1e-4,
+                    "{speed} m/s, {ahead} m: {front} vs {}",
+                    sf + ahead
+                );
+            } else {
+                assert!(
+                    front < sf + speed * DT + 0.01,
+                    "{speed} m/s, {ahead} m: {front}"
+                );
+            }
+            assert!((f.s_front(a).unwrap() - front).abs() < 1e-4);
+        }
+    }
+
+    #[test]
     fn a_vehicle_whose_back_the_simulator_has_on_the_lane_before_is_placed_by_xy() {
         // Lane 12 starts at arc length 210 (after junction lane 11). The
         // simulator lags 3 m behind on lane 12: no speed move makes that

@@ -10,7 +10,7 @@ use crate::substep::{
     advance, braking_mean_speed, control_record, held_speed, past_route_end, state_at,
     stepped_finite, substeps, Front, HeldGaps, LastStep,
 };
-use crate::{Driven, RouteFleet, TrafficError};
+use crate::{Driven, RouteFleet, TrafficError, ADVANCE_MAX_M};
 use blendtrack::path::wrap_angle;
 use blendtrack::{Fleet, FleetInputs, FleetOutputs, NextStates, VehicleState};
 use nalgebra::Point2;
@@ -296,20 +296,19 @@ impl RouteFleet {
         let d = self.driven[slot]
             .as_mut()
             .expect("planned slots are driven");
-        let state = state_at(next, i);
+        let mut state = state_at(next, i);
         let finite = stepped_finite(&state, out.s_rear_m[i]);
         let (v, th) = (state.v_mps, state.theta_rad);
         let reach = d.body.reach_m;
-        let (xf, yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());
+        let (mut xf, mut yf) = (state.x_m + reach * th.cos(), state.y_m + reach * th.sin());
         // The front's arc length at the NEW state (the controller's
         // outputs are of the state it was given, one step behind).
-        let sf_new = if finite {
+        let mut sf_new = if finite {
             front_arc_after(&self.fleet, slot, d, Point2::new(xf, yf), v * dt_s)?
         } else {
             f64::NAN
         };
-        let k = if finite { d.route.piece_at(sf_new) } else { 0 };
-        let piece = d.route.pieces[k];
+        let mut k = if finite { d.route.piece_at(sf_new) } else { 0 };
         let motion = Motion {
             usable: out.ok[i] && finite,
             lateral_error_m: out.lateral_error_m[i],
@@ -324,7 +323,28 @@ impl RouteFleet {
             },
         };
         let st = self.settings;
-        let p = choose_move(d, k, &st, &motion);
+        let mut p = choose_move(d, k, &st, &motion);
+        if p.mv == Move::Xy && v < CATCH_UP_BELOW_MPS {
+            if let Some(ahead) = simulator_ahead(d, k, sf_new) {
+                // A crawl: never put back (see `simulator_ahead`); the new
+                // state goes on to where the simulator has the front.
+                state.x_m += ahead * th.cos();
+                state.y_m += ahead * th.sin();
+                (xf, yf) = (xf + ahead * th.cos(), yf + ahead * th.sin());
+                sf_new += ahead;
+                k = d.route.piece_at(sf_new);
+                p = choose_move(
+                    d,
+                    k,
+                    &st,
+                    &Motion {
+                        s_front_m: sf_new,
+                        ..motion
+                    },
+                );
+            }
+        }
+        let piece = d.route.pieces[k];
         let mut red = false;
         let mut due = false;
         if p.mv != Move::Invalid {
@@ -443,4 +463,38 @@ fn crossed_red(signals: &[Vec<Signal>], d: &Driven, s_new: f64) -> bool {
             && stop.s_m <= s_new
             && signal_at(signals, stop) == Signal::Stop
     })
+}
+
+/// Below this speed (m/s) a move by (x, y) never puts a vehicle back behind
+/// where the simulator has its front ([`simulator_ahead`]).
+const CATCH_UP_BELOW_MPS: f64 = 2.0;
+
+/// The most (m) a piece's track may lie off its lane's centreline for
+/// [`simulator_ahead`] to compare lane positions there.
+const CATCH_UP_OFFSET_M: f64 = 0.1;
+
+/// How far (m of track, `0 < x <=` [`ADVANCE_MAX_M`]) the simulator has the
+/// front of `d` ahead of arc length `sf_new` on piece `k`'s lane, when it
+/// has it on that lane and the track lies on the lane there; None
+/// otherwise. In a stop-and-go crawl the speed-only moves let the
+/// simulator run ahead of blendtrack's state (it is slowed, never put
+/// back: `placement::glide_move`), and the next move by (x, y) put the car
+/// back onto the driver behind it: at Eccles (30 %, seed 8, 393 s; seed 6,
+/// 408 s) a controlled car creeping onto 145852815's lane 3 just past the
+/// junction was moved 0.5 m back, a collision each time.
+pub(crate) fn simulator_ahead(d: &Driven, k: usize, sf_new: f64) -> Option<f64> {
+    let (lane, at) = d.known?;
+    let piece = &d.route.pieces[k];
+    // Only where the track lies on the lane: where it cuts a corner (a
+    // rounded turn, a junction lane it leaves) SUMO's lane position runs
+    // ahead of the arc length by design (`Route::arc_gap`).
+    if piece.lane != lane
+        || !sf_new.is_finite()
+        || !(piece.scale > 0.0)
+        || !(piece.offset_m <= CATCH_UP_OFFSET_M)
+    {
+        return None;
+    }
+    let ahead = (at - piece.lane_pos_at(sf_new)) / piece.scale;
+    (ahead > 0.0 && ahead <= ADVANCE_MAX_M).then_some(ahead)
 }
