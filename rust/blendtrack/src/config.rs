@@ -110,7 +110,7 @@ pub struct ControllerConfig {
     /// Deceleration (m/s^2, < 0) at which curve speeds are previewed: a
     /// vehicle brakes for a curve ahead at about this much.
     pub curve_deceleration: f64,
-    /// Standard deviation (m, >= 0) of a Gaussian the path's curvature is
+    /// Standard deviation (m, >= 0) of a Gaussian the path's |curvature| is
     /// averaged with along the arc for the curve speeds; 0 (default): the
     /// curvature as the controllers read it. A road's curve drawn as a
     /// polyline (SUMO's lane shapes: vertices up to about 20 m apart on a
