@@ -286,3 +286,37 @@ def test_a_compare_counts_the_collisions_blendtrack_found(tmp_path: Path) -> Non
             w.writerow({k: "" for k in COLLISION_COLUMNS} | {"detected_by": by})
     assert count_remote_collisions(f) == 2
     assert count_remote_collisions(tmp_path / "none.csv") == 0
+
+
+def test_a_pair_sumo_reports_after_blendtrack_found_it_is_counted_once(tmp_path: Path) -> None:
+    """blendtrack finds a pair SUMO does not look at (a vehicle moved by
+    (x, y) under teleport) and hands its vehicle back; the two stay in
+    contact and SUMO reports them once its exemption runs out. That report
+    is listed in collisions.csv as a repeat, not counted again, in the
+    run's summary nor in a compare's count (SUMO's statistics include it)."""
+    from blendtrack.sumo import _count_collisions
+    from blendtrack.sumo.records import RunResult
+    from blendtrack.sumo.outputs import REPEAT, count_remote_collisions
+
+    sd = tmp_path / "sumo"
+    sd.mkdir()
+    (sd / "collisions.xml").write_text(
+        '<collisions>'
+        '<collision time="519.00" type="collision" lane="58[0]_0" collider="a" victim="b" colliderType="car" victimType="car"/>'
+        '<collision time="530.00" type="collision" lane="58[0]_0" collider="a" victim="b" colliderType="car" victimType="car"/>'
+        '<collision time="519.00" type="collision" lane="x_0" collider="c" victim="d" colliderType="car" victimType="car"/>'
+        '</collisions>')
+    (tmp_path / "vehicles.csv").write_text("id\na\n")
+    result = RunResult(records=[], summary={})
+    # blendtrack found (a, b) at 509 s: SUMO's 519 s report is the same
+    # contact; its 530 s one (21 s on) and (c, d) are collisions of their own.
+    _count_collisions(result, tmp_path, [(509.0, "a", "b", "58[0]_0", "car", "car")])
+    with open(tmp_path / "collisions.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [(r["time_s"], r["collider"], r["detected_by"]) for r in rows] == [
+        ("509.0", "a", "blendtrack"), ("519.0", "a", REPEAT), ("519.0", "c", "sumo"), ("530.0", "a", "sumo")]
+    assert result.summary["collisions_all"] == 3
+    assert result.summary["collisions_with_controlled"] == 2
+    # A compare adds to SUMO's statistics (3 reports, the repeat among
+    # them) blendtrack's one find less the repeat: 3 collisions in all.
+    assert count_remote_collisions(tmp_path / "collisions.csv") == 0

@@ -128,17 +128,23 @@ def _count_collisions(result: RunResult, out: Path, remote: list[tuple[float, st
     for vehicles moved by (x, y) under ``collision.action teleport``
     (``remote``, found by blendtrack: :mod:`blendtrack.sumo.collisions`), to
     the summary (``collisions_all``, ``collisions_with_controlled``: every
-    collision of the run, counted the same under any ``collision.action``)
-    and writes ``collisions.csv``, in order of time."""
+    collision of the run, counted the same under any ``collision.action``;
+    a pair SUMO reports again after blendtrack found it is listed but not
+    counted again: ``outputs.mark_repeats``) and writes ``collisions.csv``,
+    in order of time."""
     import csv
 
-    from blendtrack.sumo.outputs import COLLISION_COLUMNS, read_collisions, remote_collision_rows
+    from blendtrack.sumo.collisions import REMOTE_WINDOW_S
+    from blendtrack.sumo.outputs import REPEAT, COLLISION_COLUMNS, mark_repeats, read_collisions, remote_collision_rows
 
     ids = _Ids(out / "vehicles.csv")
     rows = read_collisions(out / "sumo" / "collisions.xml", ids) + remote_collision_rows(remote, ids)
+    # (Stable: at equal times SUMO's rows come first.)
     rows.sort(key=lambda r: float(r["time_s"]))  # type: ignore[arg-type]
-    result.summary["collisions_all"] = len(rows)
-    result.summary["collisions_with_controlled"] = sum(int(r["controlled_involved"]) for r in rows)
+    rows = mark_repeats(rows, REMOTE_WINDOW_S + 1.0)
+    counted = [r for r in rows if r["detected_by"] != REPEAT]
+    result.summary["collisions_all"] = len(counted)
+    result.summary["collisions_with_controlled"] = sum(int(r["controlled_involved"]) for r in counted)
     with open(out / "collisions.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=COLLISION_COLUMNS)
         w.writeheader()
