@@ -13,8 +13,6 @@ import csv
 from pathlib import Path
 from typing import Any
 
-import pytest
-
 from blendtrack import sumo
 from blendtrack.sumo.runner import RunOptions
 

@@ -91,11 +91,11 @@ class PlacementCheck:
     def lane_widths(self, lanes: np.ndarray) -> np.ndarray:
         """The widths (m) of the interned lanes ``lanes``."""
         if len(self._widths) < len(self._names):
-            more = [self.lane_width(name) for name in self._names[len(self._widths) :]]
+            more = [self._width(name) for name in self._names[len(self._widths) :]]
             self._widths = np.concatenate([self._widths, np.array(more)])
         return self._widths[lanes]
 
-    def lane_width(self, name: str) -> float:
+    def _width(self, name: str) -> float:
         """A lane's width; +inf for a name that is no lane of the network
         (the empty lane of a vehicle SUMO has off the road)."""
         try:

@@ -387,21 +387,16 @@ class SumoRun:
                 self.lanes.note_insertion(vid)
             vtype = sumo.vehicle.getTypeID(vid)
             if self.selection.is_selected(vid, vtype, self.vehicles.taken):
-                self._take_over(vid, t)
+                try:
+                    self.vehicles.take_over(vid, t)
+                    if vid in self.active:
+                        self.stops.take_over(self.active[vid])
+                except blendtrack.PathError:
+                    # An undrivable route: leave it to SUMO, and say so.
+                    self.counts["takeover_failures"] += 1
+                    self._background += 1
             else:
                 self._background += 1
-
-    def _take_over(self, vid: str, t: float) -> None:
-        """Selected ``vid`` is driven by blendtrack from now on (or, for an
-        undrivable route, left to SUMO and counted)."""
-        try:
-            self.vehicles.take_over(vid, t)
-            if vid in self.active:
-                self.stops.take_over(self.active[vid])
-        except blendtrack.PathError:
-            # An undrivable route: leave it to SUMO, and say so.
-            self.counts["takeover_failures"] += 1
-            self._background += 1
 
     def _control_step(self, t: float) -> None:
         """Observe, then plan and step, then apply."""

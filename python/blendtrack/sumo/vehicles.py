@@ -176,14 +176,8 @@ class Controlled:
             self.index = {vid: i for i, vid in enumerate(self.ids)}
             self._dirty = False
 
-    def _reach(self, info: dict[str, Any], veh: VehicleParams) -> float:
-        """From the front bumper back to the rear axle (m), for a vType's
-        ``info`` and vehicle parameters ``veh``."""
-        overhang = max(0.5 * (info["length"] - veh.wheelbase_m), 0.0)
-        return veh.wheelbase_m + overhang
-
     def take_over(self, vid: str, t: float) -> None:
-        """``vid`` (departed, selected) is driven by blendtrack from now on."""
+        """``vid`` (just departed, selected) is driven by blendtrack from now on."""
         v = self.conn.sumo.vehicle
         vtype = v.getTypeID(vid)
         info = self.selection.type_info(vtype)
@@ -200,7 +194,8 @@ class Controlled:
             cfg = cfg.replace(preferred_speed=info["max_speed"] * float(v.getSpeedFactor(vid)))
         x, y = v.getPosition(vid)
         theta = math.pi / 2.0 - math.radians(float(v.getAngle(vid)))
-        reach = self._reach(info, veh)
+        overhang = max(0.5 * (info["length"] - veh.wheelbase_m), 0.0)
+        reach = veh.wheelbase_m + overhang
         slot = self.fleet.add_vehicle(
             track, cfg, veh,
             reach_m=reach, length_m=info["length"], min_gap_m=info["min_gap"],
