@@ -1675,6 +1675,55 @@ def test_a_vehicle_merging_from_another_junction_lane_is_followed_when_it_gets_t
     assert j.leader_at_merge("me", "maj", track, None) is None
 
 
+def test_the_leader_a_merging_vehicle_displaces_stays_a_soft_obstacle() -> None:
+    """The step's leader look-up (``SumoRun._leaders``) on the merge above:
+    "me" stands on "maj" at 30 m, 20 + 6 = 26 m from the merge point;
+    "foe" on ":m_1_0" 3 m from it at 10 m/s is nearer (gap 26 - 3 - 5 -
+    2.5 = 15.5 m, stop point 15.5 + 10^2 / 8 = 28 m). Where its stop point
+    is nearer than that of "me"'s own leader "stand" (standing), "foe"
+    becomes the leader and "stand" is handed on as a vehicle to line up
+    behind (a soft obstacle), not dropped: over a 1 s step the foe drives
+    on while "stand" does not, and with "stand" dropped a controlled car
+    drove into it (Bologna, 203[0]). A leader the merge rule keeps is not
+    handed on."""
+    from blendtrack.sumo.runner import SumoRun
+
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="maj", pos=30.0, speed=0.0, min_gap=2.5)
+    v.add("foe", lane=":m_1_0", pos=5.0, speed=10.0, length=5.0)
+    v.add("stand", speed=0.0)
+    conn.lanes = {":m_1_0": ["foe"]}
+    lead = ["stand", 27.0]
+    conn.get_leader = lambda vid, _range: tuple(lead)  # type: ignore[attr-defined]
+    conn.vehicles_on_lanes = lambda lanes: [[]]  # type: ignore[attr-defined]
+    handed: list[list[tuple[str, Any]]] = []
+    geo = SimpleNamespace(piece_lane=["maj", ":m_0_0", "out"], memo={})
+    run = SimpleNamespace(
+        fleet=SimpleNamespace(lanes_with_followers=lambda slots: np.array([0]),
+                              leaders_on_lanes=lambda slots, lanes, on: np.array([0])),
+        vehicles=SimpleNamespace(ids=["me"], slots=np.array([0]), order=[SimpleNamespace(geo=geo)]),
+        tracks=SimpleNamespace(lanes=SimpleNamespace(names=["maj"])),
+        conn=conn,
+        network=SimpleNamespace(fanouts=dict),
+        junctions=_merge_junctions(conn),
+        sumo_leaders=SimpleNamespace(correct=lambda leaders: leaders),
+        lanes=SimpleNamespace(add_merge_leads=handed.append),
+    )
+    # "stand" 27 m ahead: nearer than the foe's 28 m, it stays the leader.
+    assert SumoRun._leaders(run) == ([0], [("stand", 27.0)])  # type: ignore[arg-type]
+    assert handed == []
+    # 29 m: the foe's 28 m is nearer; "stand" is handed on.
+    lead[1] = 29.0
+    assert SumoRun._leaders(run) == ([0], [("foe", pytest.approx(15.5))])  # type: ignore[arg-type]
+    assert handed == [[("me", ("stand", 29.0))]]
+    # No leader of its own: nothing to hand on.
+    handed.clear()
+    lead[0] = ""
+    assert SumoRun._leaders(run) == ([0], [("foe", pytest.approx(15.5))])  # type: ignore[arg-type]
+    assert handed == []
+
+
 def test_a_sumo_driver_about_as_near_a_merge_point_is_followed() -> None:
     """SUMO's drivers from a minor road do not wait for a controlled vehicle
     standing at a merge: one up to MERGE_DEFER_M (3 m) farther from the merge
