@@ -205,6 +205,9 @@ struct Driven {
     known: Option<(u32, f64)>,
     /// The speed last sent to the simulator (NaN before the first).
     sumo_speed: f64,
+    /// The front pose (x, y, heading) the last move by (x, y) sent, while
+    /// no other move has followed it (a [`Move::Hold`] keeps it).
+    placed_xy: Option<(f64, f64, f64)>,
     /// Arc length where the caller wants the front to stop (a SUMO
     /// `<stop>`), NaN when none; see [`RouteFleet::set_halt`].
     halt_m: f64,
@@ -409,6 +412,7 @@ impl RouteFleet {
             holding: None,
             known: None,
             sumo_speed: f64::NAN,
+            placed_xy: None,
             halt_m: f64::NAN,
             lead_speed: f64::NAN,
             steps: 0,
@@ -454,6 +458,7 @@ impl RouteFleet {
         d.yellow = None;
         d.holding = None;
         d.halt_m = f64::NAN;
+        d.placed_xy = None;
         self.plan = None;
         Ok(())
     }
@@ -479,6 +484,7 @@ impl RouteFleet {
         let d = self.driven[slot as usize].as_mut().expect("checked above");
         d.state.x_m += by_m * d.state.theta_rad.cos();
         d.state.y_m += by_m * d.state.theta_rad.sin();
+        d.placed_xy = None;
         self.plan = None;
         Ok(())
     }

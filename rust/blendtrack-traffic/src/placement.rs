@@ -479,6 +479,43 @@ mod tests {
     }
 
     #[test]
+    fn a_vehicle_standing_where_a_move_by_xy_put_it_is_sent_nothing_more() {
+        // On the junction piece (200-210 m, not plain) every move is by
+        // (x, y). Behind a leader standing 0.5 m ahead the vehicle stands:
+        // the first step's move puts it, the next ones send nothing (the
+        // simulator keeps it there; sent again, the move would undo the
+        // simulator's own teleport of a vehicle that waited too long). Once
+        // the leader is gone it moves by (x, y) again.
+        let (mut f, t) = fleet_on(road(None, true));
+        let a = f
+            .add_vehicle(t, None, None, body(), at(201.0, 0.0), None)
+            .unwrap() as i64;
+        let mut moves = Vec::new();
+        for _ in 0..4 {
+            plan_one(&mut f, a, (0.5, 0.0), (-1, f64::NAN));
+            let out = f.step(&[], DT).unwrap();
+            assert_eq!(out.v_mps[0], 0.0);
+            moves.push(out.moves[0]);
+        }
+        assert_eq!(moves, [Move::Xy, Move::Hold, Move::Hold, Move::Hold]);
+        plan_one(&mut f, a, (f64::NAN, f64::NAN), (-1, f64::NAN));
+        let out = f.step(&[], DT).unwrap();
+        assert!(out.v_mps[0] > 0.0);
+        assert_eq!(out.moves[0], Move::Xy);
+        // Moved on by the bridge (advance_state), it is put again even standing.
+        let b = f
+            .add_vehicle(t, None, None, body(), at(202.0, 0.0), None)
+            .unwrap() as i64;
+        for _ in 0..2 {
+            plan_one(&mut f, b, (0.5, 0.0), (-1, f64::NAN));
+            f.step(&[], DT).unwrap();
+        }
+        f.advance_state(b, 0.3).unwrap();
+        plan_one(&mut f, b, (0.5, 0.0), (-1, f64::NAN));
+        assert_eq!(f.step(&[], DT).unwrap().moves[0], Move::Xy);
+    }
+
+    #[test]
     fn a_crawl_moved_by_xy_is_never_put_back_behind_the_simulator() {
         // 0.6 m off its lane's centreline: moved by (x, y). The simulator
         // has the front `ahead` m further on lane 10 than blendtrack: at a

@@ -344,6 +344,36 @@ impl RouteFleet {
                 );
             }
         }
+        // What the simulator is given for a move by (x, y): the front, or,
+        // with the front further off the track than XY_ON_TRACK_M (a turn
+        // tighter than the vehicle can drive), the track's point at the
+        // front's arc length, heading along the track.
+        let (mut x_put, mut y_put, mut th_put) = (xf, yf, th);
+        let mut on_track = false;
+        if p.mv == Move::Xy {
+            let path = &self
+                .fleet
+                .track(self.fleet.vehicle_track(slot as i64)? as i64)?
+                .path;
+            let at = path.point_at(sf_new);
+            if (at - Point2::new(xf, yf)).norm() > XY_ON_TRACK_M {
+                (x_put, y_put, th_put) = (at.x, at.y, path.heading_at(sf_new));
+                on_track = true;
+            }
+        }
+        // A vehicle standing where the last move by (x, y) put it, still
+        // told to stand, needs nothing sent: the simulator keeps it there.
+        // Sent again every step, the move also undid the simulator's own
+        // teleport of a vehicle that had waited too long (SUMO applies a
+        // remote move after the step's teleports): a car waiting 300 s to
+        // turn left was teleported onward, put back at its line as one of
+        // SUMO's (no longer controlled), and run into 11 s later (Bologna,
+        // 34_2).
+        let pose = (x_put, y_put, th_put);
+        if p.mv == Move::Xy && v == 0.0 && d.sumo_speed == 0.0 && d.placed_xy == Some(pose) {
+            p.mv = Move::Hold;
+            p.sumo_speed = 0.0;
+        }
         let piece = d.route.pieces[k];
         let mut red = false;
         let mut due = false;
@@ -381,6 +411,11 @@ impl RouteFleet {
             d.s_front_m = sf_new;
             d.known = p.predicted;
             d.sumo_speed = p.sumo_speed;
+            match p.mv {
+                Move::Xy => d.placed_xy = Some(pose),
+                Move::Hold => {}
+                _ => d.placed_xy = None,
+            }
         } else {
             r.accel_mps2.push(f64::NAN);
         }
@@ -389,23 +424,6 @@ impl RouteFleet {
         r.lane_pos_m.push(p.pos);
         r.edge.push(piece.edge);
         r.lane_index.push(piece.lane_index);
-        // What the simulator is given for a move by (x, y): the front, or,
-        // with the front further off the track than XY_ON_TRACK_M (a turn
-        // tighter than the vehicle can drive), the track's point at the
-        // front's arc length, heading along the track.
-        let (mut x_put, mut y_put, mut th_put) = (xf, yf, th);
-        let mut on_track = false;
-        if p.mv == Move::Xy {
-            let path = &self
-                .fleet
-                .track(self.fleet.vehicle_track(slot as i64)? as i64)?
-                .path;
-            let at = path.point_at(sf_new);
-            if (at - Point2::new(xf, yf)).norm() > XY_ON_TRACK_M {
-                (x_put, y_put, th_put) = (at.x, at.y, path.heading_at(sf_new));
-                on_track = true;
-            }
-        }
         r.x_front_m.push(x_put);
         r.y_front_m.push(y_put);
         r.angle_deg
