@@ -600,30 +600,22 @@ mod tests {
         }
     }
 
-    /// A vehicle at `v` (its preferred speed too) 150 m along `road(None,
-    /// false)` (a give-way line at 200 m), planning as SUMO runs do
-    /// (`b_l = b_f`).
-    fn minor_road_sumo_like(v: f64) -> (RouteFleet, i64) {
-        let (path, route) = road(None, false);
-        let mut f = RouteFleet::new(TrafficSettings::default()).unwrap();
-        let cfg = ControllerConfig {
-            preferred_speed: v,
-            max_obs_deceleration: -4.0,
-            ..Default::default()
-        };
-        let t = f.add_route(path, cfg, route).unwrap() as i64;
-        let slot = f
-            .add_vehicle(t, None, None, body(), at(150.0, v), None)
-            .unwrap() as i64;
-        (f, slot)
-    }
-
     #[test]
     fn a_vehicle_too_close_to_stop_for_a_give_way_line_is_not_asked_and_goes_through() {
         // Told it may go until the line is nearer than any plan stops it
         // (SUMO runs' b_l = b_f), it is asked no more: told to wait there,
         // it stopped inside the junction and then crossed from standstill.
-        let (mut f, slot) = minor_road_sumo_like(4.0);
+        let (path, route) = road(None, false);
+        let mut f = RouteFleet::new(TrafficSettings::default()).unwrap();
+        let cfg = ControllerConfig {
+            preferred_speed: 4.0,
+            max_obs_deceleration: -4.0,
+            ..Default::default()
+        };
+        let t = f.add_route(path, cfg, route).unwrap() as i64;
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(150.0, 4.0), None)
+            .unwrap() as i64;
         let mut late = 0;
         for _ in 0..400 {
             let sf = f.s_front(slot).unwrap();
@@ -648,7 +640,17 @@ mod tests {
         // (less the margin) at about 6.5 m/s^2, harder than b_f: it is
         // still asked, and told to wait it stops before the line. Not
         // asked there, a left turner on the grid crossed the oncoming lanes.
-        let (mut f, slot) = minor_road_sumo_like(6.0);
+        let (path, route) = road(None, false);
+        let mut f = RouteFleet::new(TrafficSettings::default()).unwrap();
+        let cfg = ControllerConfig {
+            preferred_speed: 6.0,
+            max_obs_deceleration: -4.0,
+            ..Default::default()
+        };
+        let t = f.add_route(path, cfg, route).unwrap() as i64;
+        let slot = f
+            .add_vehicle(t, None, None, body(), at(150.0, 6.0), None)
+            .unwrap() as i64;
         let (mut late_asks, mut told) = (0, false);
         for _ in 0..300 {
             let gap = 199.0 - f.s_front(slot).unwrap();
