@@ -64,32 +64,14 @@ pub(crate) struct Plan {
 }
 
 /// True when the stopping law stops a vehicle at speed `v` within `gap` at
-/// no more than the planning deceleration: the yellow-light decision. Where
-/// the law has no plan (`U < 0`) it cannot: its fallback, braking at the
-/// obstacle's deceleration `b_l`, is no plan to stop there (read as one, it
-/// counted as able to stop wherever `b_l` equals `b_f`, SUMO runs' default).
+/// no more than the planning deceleration. Where the law has no plan
+/// (`U < 0`) it cannot: its fallback, braking at the obstacle's deceleration
+/// `b_l`, is no plan to stop there, and taken as one it counted as able to
+/// stop wherever `b_l` equals `b_f` (SUMO runs' default): a car 0.2 m
+/// before a give-way line at 3 m/s was asked, told to wait, stopped 1.3 m
+/// inside the junction, and crossed from standstill in front of the foe it
+/// had waited for (Bologna, junction 51).
 pub fn can_stop(cfg: &ControllerConfig, v: f64, gap_m: f64) -> bool {
-    stop_plan(cfg, v, gap_m).is_some_and(|a| a >= cfg.max_deceleration)
-}
-
-/// True when the vehicle can still stop within `gap` at all: the stopping
-/// law has a plan there, however hard, down to the vehicle's
-/// `emergency_deceleration`. A line to give way at is asked about while
-/// this holds (told to wait, the law brakes as hard as its plan says), and
-/// not after: asked 0.2 m before a give-way line at 3 m/s, where no plan
-/// stops it, a car told to wait stopped 1.3 m inside the junction and
-/// crossed from standstill into the foe it had waited for (Bologna,
-/// junction 51). Asked only while it could stop at `b_f`, a left turner
-/// reaching its line at 6 m/s 2.7 m short was not asked, nor at its
-/// internal waiting point, and crossed in front of the oncoming car (the
-/// shipped grid at 2.6 m/s^2): the law's plan stops it there at 6.5 m/s^2.
-pub fn can_still_stop(cfg: &ControllerConfig, v: f64, gap_m: f64) -> bool {
-    stop_plan(cfg, v, gap_m).is_some_and(|a| a >= cfg.emergency_deceleration)
-}
-
-/// The stopping law's plan for a standing obstacle `gap_m` ahead at speed
-/// `v` (None: no plan).
-fn stop_plan(cfg: &ControllerConfig, v: f64, gap_m: f64) -> Option<f64> {
     stopping_plan(
         v,
         gap_m,
@@ -99,6 +81,7 @@ fn stop_plan(cfg: &ControllerConfig, v: f64, gap_m: f64) -> Option<f64> {
         cfg.max_deceleration,
         cfg.max_obs_deceleration,
     )
+    .is_some_and(|a| a >= cfg.max_deceleration)
 }
 
 impl RouteFleet {
@@ -210,7 +193,7 @@ impl RouteFleet {
         let sf = d.s_front_m;
         plan.limit[i] = route.pieces[route.piece_at(sf)].speed_mps;
         let mut next = d.next_stop;
-        while next < route.stops.len() && route.stops[next].s_m < sf - STOP_KEPT_M {
+        while next < route.stops.len() && route.stops[next].s_m < sf - 0.5 {
             next += 1;
         }
         let leader = (plan.leader_gap[i], plan.leader_speed[i]);
@@ -247,9 +230,6 @@ impl RouteFleet {
         Ok(())
     }
 }
-
-/// A stop line stays the next one until the front is this far (m) past it.
-pub(crate) const STOP_KEPT_M: f64 = 0.5;
 
 /// No entry of the plan.
 pub(crate) const NO_ENTRY: usize = usize::MAX;
@@ -368,16 +348,15 @@ fn decide_stop(
             let blocked = lg.is_finite()
                 && lv < LEADER_STANDING_MPS
                 && sf + lg + margin - stop.exit_m < d.body.length_m + d.body.min_gap_m + margin;
-            // Could it still stop where the stop is kept (STOP_KEPT_M past
-            // the line; the caller decides whether a vehicle that far is
-            // still asked: at an internal waiting point, yes)?
-            let stoppable = held || can_still_stop(cfg, v, gap + margin + STOP_KEPT_M);
-            if near && blocked && stoppable {
+            if near && blocked && (held || can_stop(cfg, v, gap)) {
                 // Keep the junction clear: no room behind the
                 // leader on the far side, so wait at the line.
                 dec.stop_gap = gap;
                 dec.holding = Some(next);
-            } else if (sig == Signal::Yield || stop.check_inside) && gap < ask_reach && stoppable {
+            } else if (sig == Signal::Yield || stop.check_inside)
+                && gap < ask_reach
+                && (held || can_stop(cfg, v, gap))
+            {
                 // Give way while the simulator reports foes (or,
                 // with the right of way, while the caller sees a
                 // vehicle inside the junction in the way); too
@@ -566,7 +545,6 @@ mod tests {
 
     #[test]
     fn no_plan_to_stop_is_never_taken_for_one_even_where_the_obstacle_brakes_as_hard() {
-        use super::can_still_stop;
         // SUMO runs plan with b_l = b_f: the law's fallback (b_l where it
         // has no plan) then equals b_f, and was read as "can stop".
         let sumo = ControllerConfig {
@@ -585,26 +563,14 @@ mod tests {
             let v: f64 = 8.0;
             let need = v * v / (-2.0 * cfg.max_deceleration) + cfg.preferred_stop_dist;
             assert!(can_stop(cfg, v, need + 0.01) && !can_stop(cfg, v, need - 0.01));
-            // Stopping at all: the law has a plan (U >= 0) from
-            // v tau / 2 + b_f tau^2 / 8 + s0 on, however hard, down to
-            // emergency_deceleration (9 m/s^2), which binds at speed.
-            let tau = cfg.reaction_time;
-            for v in [3.0, 6.0] {
-                let plan_from = v * tau / 2.0 + cfg.max_deceleration * tau * tau / 8.0;
-                assert!(can_still_stop(cfg, v, plan_from + 0.01), "{v}");
-                assert!(!can_still_stop(cfg, v, plan_from - 0.01), "{v}");
-            }
-            assert!(!can_still_stop(cfg, 3.6, 0.2), "1.3 m needed");
-            assert!(can_still_stop(cfg, 6.0, 2.7) && !can_stop(cfg, 6.0, 2.7));
-            assert!(!can_still_stop(cfg, 10.0, 5.6) && can_still_stop(cfg, 10.0, 5.7));
         }
     }
 
     #[test]
     fn a_vehicle_too_close_to_stop_for_a_give_way_line_is_not_asked_and_goes_through() {
-        // Told it may go until the line is nearer than any plan stops it
-        // (SUMO runs' b_l = b_f), it is asked no more: told to wait there,
-        // it stopped inside the junction and then crossed from standstill.
+        // Told it may go until the line is nearer than it can stop at (SUMO
+        // runs' b_l = b_f), it is asked no more: told to wait there, it
+        // stopped inside the junction and then crossed from standstill.
         let (path, route) = road(None, false);
         let mut f = RouteFleet::new(TrafficSettings::default()).unwrap();
         let cfg = ControllerConfig {
@@ -620,10 +586,8 @@ mod tests {
         for _ in 0..400 {
             let sf = f.s_front(slot).unwrap();
             let v = f.state(slot).unwrap().v_mps;
-            // Too close: 0.5 m past the line (where the stop is kept)
-            // nearer than the law has a plan for, v tau / 2 + b_f tau^2 / 8
-            // (tau 1 s).
-            let too_close = 200.5 - sf < v / 2.0 - 0.5 - 0.05;
+            // Too close: the line, less the 1 m margin, within v^2 / 8.
+            let too_close = 199.0 - sf < v * v / 8.0 - 0.05;
             let (q, _) = step(&mut f, &[slot], too_close);
             if too_close && !q.is_empty() {
                 late += 1;
@@ -632,41 +596,6 @@ mod tests {
         assert_eq!(late, 0, "asked where it could no longer stop");
         let sf = f.s_front(slot).unwrap();
         assert!(sf > 260.0, "went through: front {sf}");
-    }
-
-    #[test]
-    fn a_vehicle_that_can_still_stop_hard_is_asked_and_stops_before_the_line() {
-        // At 6 m/s the law's plan stops a vehicle 2.7 m short of its line
-        // (less the margin) at about 6.5 m/s^2, harder than b_f: it is
-        // still asked, and told to wait it stops before the line. Not
-        // asked there, a left turner on the grid crossed the oncoming lanes.
-        let (path, route) = road(None, false);
-        let mut f = RouteFleet::new(TrafficSettings::default()).unwrap();
-        let cfg = ControllerConfig {
-            preferred_speed: 6.0,
-            max_obs_deceleration: -4.0,
-            ..Default::default()
-        };
-        let t = f.add_route(path, cfg, route).unwrap() as i64;
-        let slot = f
-            .add_vehicle(t, None, None, body(), at(150.0, 6.0), None)
-            .unwrap() as i64;
-        let (mut late_asks, mut told) = (0, false);
-        for _ in 0..300 {
-            let gap = 199.0 - f.s_front(slot).unwrap();
-            let late = gap < 3.0;
-            let (q, _) = step(&mut f, &[slot], told || late);
-            if late && !q.is_empty() {
-                late_asks += 1;
-                told = true;
-            }
-        }
-        assert!(late_asks > 0, "asked within 3 m at 6 m/s");
-        let sf = f.s_front(slot).unwrap();
-        assert!(
-            sf <= 200.0 && f.state(slot).unwrap().v_mps.abs() < 0.05,
-            "stopped before the line: front {sf}"
-        );
     }
 
     #[test]
