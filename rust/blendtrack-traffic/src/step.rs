@@ -374,9 +374,9 @@ impl RouteFleet {
         // SUMO's (no longer controlled), and run into 11 s later (Bologna,
         // 34_2).
         let pose = (x_put, y_put, th_put);
+        // (A move by (x, y) sends the speed v, here 0, so the Hold keeps it.)
         if p.mv == Move::Xy && v == 0.0 && d.sumo_speed == 0.0 && d.placed_xy == Some(pose) {
             p.mv = Move::Hold;
-            p.sumo_speed = 0.0;
         }
         let piece = d.route.pieces[k];
         let mut red = false;
