@@ -555,6 +555,35 @@ mod tests {
     }
 
     #[test]
+    fn a_standing_vehicle_moved_by_xy_does_not_creep_to_where_the_simulator_maps_it() {
+        // Standing 1 m behind a standing leader, 0.6 m off its lane's
+        // centreline (moved by (x, y)), with the simulator's front a few
+        // centimetres ahead, as SUMO maps a front put on a curved junction
+        // lane: the state stays where it stands, step after step (caught
+        // up every step, a left turner crept over its waiting point).
+        for ahead in [0.03, 0.5] {
+            let (mut f, t) = fleet_on(road(None, true));
+            let mut st = at(50.0, 0.0);
+            st.y_m = 0.6;
+            let a = f.add_vehicle(t, None, None, body(), st, None).unwrap() as i64;
+            let sf = f.s_front(a).unwrap();
+            for _ in 0..5 {
+                let now = f.s_front(a).unwrap();
+                plan_one(&mut f, a, (1.0, 0.0), (10, now + ahead));
+                let out = f.step(&[], DT).unwrap();
+                assert_eq!(out.v_mps[0], 0.0);
+                assert!(
+                    matches!(out.moves[0], Move::Xy | Move::Hold),
+                    "{:?}",
+                    out.moves[0]
+                );
+            }
+            let crept = f.s_front(a).unwrap() - sf;
+            assert!(crept.abs() < 1e-9, "{ahead} m ahead: crept {crept} m");
+        }
+    }
+
+    #[test]
     fn a_crawl_the_simulator_runs_ahead_of_by_speed_moves_catches_up() {
         // On its lane's centreline: speed-only moves. The simulator has the
         // front `ahead` m further on lane 10 than blendtrack. At a crawl

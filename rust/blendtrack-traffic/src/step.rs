@@ -326,12 +326,19 @@ impl RouteFleet {
         let mut p = choose_move(d, k, &st, &motion);
         if v < CATCH_UP_BELOW_MPS {
             if let Some(ahead) = simulator_ahead(d, k, sf_new).filter(|&ahead| {
-                p.mv == Move::Xy
+                (p.mv == Move::Xy && v > 0.0)
                     || ((p.mv == Move::Speed || p.mv == Move::Hold)
                         && ahead > CATCH_UP_SPEED_MOVE_M)
             }) {
                 // A crawl: never put back (see `simulator_ahead`); the new
-                // state goes on to where the simulator has the front.
+                // state goes on to where the simulator has the front. Not
+                // a vehicle standing: SUMO maps the front it is put at a few
+                // centimetres on along a curved junction lane, and caught
+                // up with every step, a left turner waiting at its internal
+                // point on the grid crept 0.8 m in 3 s over it; SUMO's
+                // oncoming drivers then stopped for it inside the junction,
+                // in its way, and neither moved again (junctions B0 and C1,
+                // seed 2). Standing, it is held where it was put.
                 state.x_m += ahead * th.cos();
                 state.y_m += ahead * th.sin();
                 (xf, yf) = (xf + ahead * th.cos(), yf + ahead * th.sin());
