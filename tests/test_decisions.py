@@ -825,17 +825,17 @@ def test_refresh_tls_passes_on_changed_lights_only() -> None:
     key = tc.TL_RED_YELLOW_GREEN_STATE
     conn.tls_results = {"a": {key: "Gr"}, "b": {key: "rG"}}
     conn.tls_now.update(a="Gr", b="rG")
-    j.refresh_tls()
+    j.refresh_tls(0.0)
     assert sorted(sent) == [(0, "Gr"), (1, "rG")]
     sent.clear()
     conn.tls_now.update(b="ry")
-    j.refresh_tls()
+    j.refresh_tls(0.0)
     assert sent == [(1, "ry")] and j.tls_state == {"a": "Gr", "b": "ry"}
     # A light switched by another client after the step: its state now, not
     # the subscription's of the step (the same on libsumo and TraCI).
     sent.clear()
     conn.tls_now.update(a="rr")
-    j.refresh_tls()
+    j.refresh_tls(0.0)
     assert sent == [(0, "rr")]
 
 
@@ -850,11 +850,11 @@ def test_refresh_tls_reads_each_light_where_none_is_subscribed() -> None:
     tracks = SimpleNamespace(lights=SimpleNamespace(id={"a": 0, "b": 1}.__getitem__))
     j = Junctions(conn, None, tracks, fleet, 4.0)  # type: ignore[arg-type]
     conn.tls_now.update(a="Gr", b="rG")
-    j.refresh_tls()
+    j.refresh_tls(0.0)
     assert sent == [(0, "Gr"), (1, "rG")]
     sent.clear()
     conn.tls_now.update(b="ry")
-    j.refresh_tls()
+    j.refresh_tls(0.0)
     assert sent == [(1, "ry")] and j.tls_state == {"a": "Gr", "b": "ry"}
 
 

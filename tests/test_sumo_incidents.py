@@ -68,7 +68,7 @@ def _scheduled(routes: str) -> int:
     return n
 
 
-def _scenario(net: Path, folder: Path, routes: str, action: str = "teleport", junctions: bool = True) -> sumo.Scenario:
+def _scenario(net: Path, folder: Path, routes: str, action: str = "teleport", junctions: bool = True, step: float = 0.1) -> sumo.Scenario:
     """The scenario; ``junctions`` False leaves SUMO's collision.check-junctions
     out of its configuration (as most published scenarios do)."""
     folder.mkdir(parents=True, exist_ok=True)
@@ -76,7 +76,7 @@ def _scenario(net: Path, folder: Path, routes: str, action: str = "teleport", ju
     check = '<collision.check-junctions value="true"/>' if junctions else ""
     (folder / "x.sumocfg").write_text(f"""<configuration>
   <input><net-file value="{net}"/><route-files value="x.rou.xml"/></input>
-  <time><begin value="0"/><step-length value="0.1"/></time>
+  <time><begin value="0"/><step-length value="{step}"/></time>
   <processing><collision.action value="{action}"/>{check}</processing>
   <report><no-step-log value="true"/><no-warnings value="false"/></report>
 </configuration>""")
@@ -106,6 +106,34 @@ def test_controlled_vehicles_cross_no_red_light_by_sumos_state(net: Path, tmp_pa
     assert 0 < arrived <= s["signal_crossings_checked"] <= s["controlled_vehicles"], (arrived, s["signal_crossings_checked"])
     assert all(row["state"] in "yY" or row["state_at_moves"] in "yY" for row in _red_lights(tmp_path / "o"))
     assert s["red_light_violations"] == 0 and s["collisions_all"] == 0
+
+
+def test_the_plan_gets_the_state_a_light_will_have_while_sumo_moves(net: Path, tmp_path: Path) -> None:
+    """At a 1 s step the moves pushed at t run in SUMO's step from t, under
+    the state SUMO shows at t + 1: the state passed to the RouteFleet at t
+    is that one (the light's fixed-time program switches at the start of
+    the step), and no controlled vehicle crosses on red by SUMO's state."""
+    sc = _scenario(net, tmp_path / "sc", FLOWS, step=1.0)
+    run = SumoRun(sc, RunOptions(controlled_fraction=1.0, end_s=150, progress=False), tmp_path / "o")
+    seen: list[tuple[float, str, str]] = []
+    refresh = run.junctions.refresh_tls
+
+    def record(t: float) -> None:
+        refresh(t)
+        seen.append((t, run.junctions.tls_state["J"], run.junctions._sent["J"]))
+
+    run.junctions.refresh_tls = record  # type: ignore[method-assign]
+    res = run.run()
+    assert len(seen) > 100
+    switches = 0
+    for (t0, now0, sent0), (t1, now1, _) in zip(seen, seen[1:]):
+        assert t1 == t0 + 1.0
+        assert sent0 == now1, (t0, now0, sent0, now1)
+        switches += now1 != now0
+    # Every switch of the program was passed on a step ahead of the state read.
+    assert switches >= 8
+    assert res.summary["red_light_crossings_sumo"] == 0, _red_lights(tmp_path / "o")
+    assert res.summary["red_light_violations"] == 0
 
 
 def _client_program(run: SumoRun, t: float) -> None:
@@ -144,7 +172,7 @@ def test_a_falsified_signal_table_is_caught_by_sumos_state(net: Path, tmp_path: 
 
     def green(r: SumoRun, t: float) -> None:
         n = len(r.sumo.trafficlight.getRedYellowGreenState("J"))
-        r.junctions.refresh_tls = lambda: None  # type: ignore[method-assign]
+        r.junctions.refresh_tls = lambda t: None  # type: ignore[method-assign]
         if "J" in r.tracks.lights.ids:
             r.fleet.set_signal(r.tracks.lights.id("J"), "G" * n)
 

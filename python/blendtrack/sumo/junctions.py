@@ -14,6 +14,7 @@ import numpy as np
 from blendtrack import RouteFleet
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.geometry import body_segment, path_ahead, segments_distance
+from blendtrack.sumo.lights import SignalAhead
 from blendtrack.sumo.network import Network, edge_of
 from blendtrack.sumo.tracks import Tracks
 
@@ -136,6 +137,10 @@ class Junctions:
         self.halted: dict[str, str] = {}
         #: Each traffic light's last state (as SUMO's state string).
         self.tls_state: dict[str, str] = {}
+        #: Each light's state for the coming step as last passed to the RouteFleet.
+        self._sent: dict[str, str] = {}
+        #: The lights' coming states (made once SUMO runs).
+        self.ahead: SignalAhead | None = None
         #: Can a light have been switched since SUMO's step (a step hook,
         #: another TraCI client)? Then ``refresh_tls`` reads each anew.
         self.lights_anew = True
@@ -170,8 +175,11 @@ class Junctions:
         self._going_now = set()
         self._approaching = None
 
-    def refresh_tls(self) -> None:
-        """Passes the lights that changed this step to the RouteFleet.
+    def refresh_tls(self, t: float) -> None:
+        """Reads the lights' states after SUMO's step to ``t`` (``tls_state``)
+        and passes each light's state for the coming step, as
+        :class:`~blendtrack.sumo.lights.SignalAhead` gives it, to the
+        RouteFleet where it changed.
 
         With ``lights_anew`` each light's state is read anew (a microsecond
         each with libsumo): the subscription's value is the one of the
@@ -183,25 +191,25 @@ class Junctions:
         subscription's value is the state now, and is taken as it is;
         where the lights are not subscribed to (``SumoConnection.subscribe_lights``)
         each is read, which gives the same state."""
-        anew = self.lights_anew
-        light = self.tracks.lights.id
-        set_signal = self.fleet.set_signal
         if not self.conn.light_subscriptions:
-            get_state, known = self.conn.light_state, self.tls_state
-            for tls in self.conn.lights:
-                state = get_state(tls)
-                if known.get(tls) != state:
-                    known[tls] = state
-                    set_signal(light(tls), state)
-            return
-        tl = self.conn.sumo.trafficlight
-        results = tl.getAllSubscriptionResults()
-        key = self.conn.tc.TL_RED_YELLOW_GREEN_STATE
-        for tls in results:
-            state = tl.getRedYellowGreenState(tls) if anew else results[tls][key]
-            if self.tls_state.get(tls) != state:
-                self.tls_state[tls] = state
-                set_signal(light(tls), state)
+            get_state = self.conn.light_state
+            states: Any = ((tls, get_state(tls)) for tls in self.conn.lights)
+        else:
+            tl = self.conn.sumo.trafficlight
+            results = tl.getAllSubscriptionResults()
+            key = self.conn.tc.TL_RED_YELLOW_GREEN_STATE
+            anew = self.lights_anew
+            states = ((tls, tl.getRedYellowGreenState(tls) if anew else results[tls][key]) for tls in results)
+        if self.ahead is None:
+            self.ahead = SignalAhead(self.conn.sumo.trafficlight)
+        light = self.tracks.lights.id
+        set_signal, coming, known, sent = self.fleet.set_signal, self.ahead.coming, self.tls_state, self._sent
+        for tls, state in states:
+            known[tls] = state
+            ahead = coming(tls, state, t)
+            if sent.get(tls) != ahead:
+                sent[tls] = ahead
+                set_signal(light(tls), ahead)
 
     def must_yield(self, vid: str, slot: int) -> bool:
         """SUMO's view of the link ahead: does it lack priority with foes

@@ -416,7 +416,7 @@ class SumoRun:
             self.lanes.tactical_changes(self.vehicles.order, self._steps)
         if self.conn.has_tls:
             self.junctions.lights_anew = bool(self.step_hooks) or self.conn.backend != "libsumo"
-            self.junctions.refresh_tls()
+            self.junctions.refresh_tls(t)
         # The lanes' vehicle lists from here on are read after this step's
         # lane changes and repairs, once, and shared by the leader look-ups
         # and the junction checks.
