@@ -1458,6 +1458,44 @@ def test_room_on_the_far_lane_counts_a_vehicle_still_in_the_junction_before_it()
     assert lcs.room_on_lane("me", "e_2", 10.0, 0.0, 10.0)
 
 
+def test_a_change_over_three_lanes_needs_room_behind_on_the_lanes_between() -> None:
+    """From lane 1 to lane 4 from a standstill, front at 10 m, 10 m long
+    (sqrt(20) s at 1 m/s^2): lane 3, between the lane beside (2) and the
+    last (4), is checked for the vehicle behind. A driver at 13 m/s with its
+    front at 0 m (the back is at 5 m: a gap of 2.5 m less its minGap) leaves
+    no room there (53.1 m needed); on lanes 2, 4 and 5 (checked
+    elsewhere, or beyond the change) it does not count here; ahead of the
+    front on lane 3 it does not count either; the same way down, from 4 to
+    1 (lane 2 between); a change over two lanes has no lane between."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", pos=10.0, speed=0.0)
+    v.add("d", pos=0.0, speed=13.0)
+    lcs = lane_changes(conn)
+    for lane, room in [("e_3", False), ("e_2", True), ("e_4", True), ("e_5", True), (None, True)]:
+        conn.lanes = {f"e_{k}": [] for k in range(6)}
+        if lane is not None:
+            conn.lanes[lane] = ["d"]
+        assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0) is room, lane
+    conn.lanes = {f"e_{k}": [] for k in range(6)}
+    conn.lanes["e_3"] = ["d"]
+    v.cars["d"]["pos"] = 30.0
+    assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0)
+    v.cars["d"]["pos"] = 0.0
+    for lane, room in [("e_2", False), ("e_3", True), ("e_1", True)]:
+        conn.lanes = {f"e_{k}": [] for k in range(6)}
+        conn.lanes[lane] = ["d"]
+        assert lcs.room_between("me", "e", 4, 1, 10.0, 0.0, 10.0) is room, lane
+    conn.lanes = {f"e_{k}": ["d"] for k in range(6)}
+    assert lcs.room_between("me", "e", 1, 3, 10.0, 0.0, 10.0)
+    # Just far enough back: the gap the closing speed needs over the change.
+    need = 5.0 + math.sqrt(20.0) * (13.0 - 10.0 / math.sqrt(20.0))
+    conn.lanes = {f"e_{k}": [] for k in range(6)}
+    conn.lanes["e_3"] = ["d"]
+    v.cars["d"]["pos"] = 5.0 - 2.5 - need - 1e-3
+    assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0)
+
+
 def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(monkeypatch: pytest.MonkeyPatch) -> None:
     """A change the route needs, 0.8 m across (past giving up by its
     offset), SUMO still having the vehicle on the lane it leaves: a vehicle

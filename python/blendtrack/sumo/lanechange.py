@@ -507,6 +507,7 @@ class LaneChanges:
         if (
             not self.room_for_change(act.vid, direction, speed, length)
             or (abs(target - current) > 1 and not self.room_on_lane(act.vid, target_lane, pos, speed, length))
+            or not self.room_between(act.vid, edge, current, target, pos, speed, length)
             or self.joining_from_beyond(act.vid, edge, target, direction, pos, length)
         ):
             self.wait_for_gap(act.vid, direction, target_lane, pos, speed, urgent)
@@ -670,7 +671,7 @@ class LaneChanges:
         duration = change_duration(speed, length, self.plan_accel)
         return self.target_lane_clear(vid, direction, length / duration, duration)
 
-    def room_on_lane(self, vid: str, lane: str, front: float, speed: float, length: float) -> bool:
+    def room_on_lane(self, vid: str, lane: str, front: float, speed: float, length: float, ahead: bool = True) -> bool:
         """``room_for_change`` on ``lane``, the last lane of a change over
         several (``getNeighbors`` sees only the lane beside): the nearest
         vehicle there (or coming onto it, ``nearest_behind``) level with or behind the changer's front, and the
@@ -678,13 +679,14 @@ class LaneChanges:
         them), each with the gap the closing speed needs over the change.
         Without it a change over two lanes landed on a vehicle there (a
         3-lane road with an exit two lanes over, due early: 9 collisions in
-        600 s by SUMO's rule, which ``collision.action teleport`` hid)."""
+        600 s by SUMO's rule, which ``collision.action teleport`` hid).
+        ``ahead`` False: the vehicle behind only (``room_between``)."""
         v = self.conn.sumo.vehicle
         get_pos, get_speed = self.conn.get_lane_pos, self.conn.get_speed
         back = front - float(v.getLength(vid))
         follower = self.nearest_behind(lane, front)
         leader: tuple[float, str] | None = None
-        for other in self.conn.vehicles_on(lane):
+        for other in self.conn.vehicles_on(lane) if ahead else ():
             at = float(get_pos(other))
             if at > front and (leader is None or at < leader[0]):
                 leader = (at, other)
@@ -697,6 +699,25 @@ class LaneChanges:
             leaders.append((at - float(v.getLength(o)) - front - float(v.getMinGap(vid)), float(get_speed(o))))
         duration = change_duration(speed, length, self.plan_accel)
         return self.target_lane_clear(vid, 0, length / duration, duration, (followers, leaders))
+
+    def room_between(self, vid: str, edge: str, current: int, target: int, front: float, speed: float, length: float) -> bool:
+        """Room behind the vehicle on every lane of ``edge`` a change from
+        lane ``current`` to ``target`` crosses between the one beside
+        (``room_for_change``'s) and the last (``room_on_lane``'s): the
+        nearest vehicle there level with or behind the front, with the gap
+        its closing speed needs over the whole change. Changes from lane 1
+        to lane 4 from a standstill at Eccles crossed lane 3 of
+        145852815-AddedOffRampEdge (88 m, before the off-ramp) at 1-4 m/s in
+        front of drivers there at 17-19 m/s (seed 9, 220 s): 9 of the 12
+        collisions with a controlled vehicle over seeds 0-23. The vehicles
+        ahead on those lanes are not judged: with them too (the last lane's
+        full check on every lane), the cars waited for three gaps at once,
+        and arrivals fell from 0.497 to 0.405 of plain SUMO's."""
+        step = 1 if target > current else -1
+        return all(
+            self.room_on_lane(vid, f"{edge}_{k}", front, speed, length, ahead=False)
+            for k in range(current + 2 * step, target, step)
+        )
 
     def joining_from_beyond(self, vid: str, edge: str, target: int, direction: int, front: float, length: float) -> bool:
         """Is a vehicle on the lane beyond ``target`` (seen from the changer)
