@@ -120,7 +120,7 @@ def test_the_plan_gets_the_state_a_light_will_have_while_sumo_moves(net: Path, t
 
     def record(t: float) -> None:
         refresh(t)
-        seen.append((t, run.junctions.tls_state["J"], run.junctions._sent["J"]))
+        seen.append((t, run.junctions.tls_state["J"], run.junctions.tls_coming["J"]))
 
     run.junctions.refresh_tls = record  # type: ignore[method-assign]
     res = run.run()

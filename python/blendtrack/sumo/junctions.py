@@ -138,7 +138,7 @@ class Junctions:
         #: Each traffic light's last state (as SUMO's state string).
         self.tls_state: dict[str, str] = {}
         #: Each light's state for the coming step as last passed to the RouteFleet.
-        self._sent: dict[str, str] = {}
+        self.tls_coming: dict[str, str] = {}
         #: The lights' coming states (made once SUMO runs).
         self.ahead: SignalAhead | None = None
         #: Can a light have been switched since SUMO's step (a step hook,
@@ -203,7 +203,7 @@ class Junctions:
         if self.ahead is None:
             self.ahead = SignalAhead(self.conn.sumo.trafficlight)
         light = self.tracks.lights.id
-        set_signal, coming, known, sent = self.fleet.set_signal, self.ahead.coming, self.tls_state, self._sent
+        set_signal, coming, known, sent = self.fleet.set_signal, self.ahead.coming, self.tls_state, self.tls_coming
         for tls, state in states:
             known[tls] = state
             ahead = coming(tls, state, t)
