@@ -5,9 +5,11 @@ vehicle's own lane-change track goes once it has left the change's edge."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 import blendtrack
 from blendtrack import ControllerConfig, RouteFleet
@@ -141,3 +143,50 @@ def test_a_vehicle_leaves_its_lane_change_track_on_the_next_edge(tmp_path: Path)
     assert worst["released"] > 0, "vehicles went back to shared tracks while still driving"
     # One step for the hook seeing the state before the control step, and the stagger.
     assert worst["steps"] <= ROUTE_CHECK_EVERY + 1
+
+
+SHARED = Path(os.environ.get("BLENDTRACK_SHARED_DIR") or ROOT.parent / "shared")
+BOLOGNA_NET = SHARED / "scenarios_real" / "bologna_acosta" / "acosta_buslanes.net.xml"
+
+
+@pytest.mark.skipif(not BOLOGNA_NET.exists(), reason="../shared/scenarios_real is not beside the repo")
+def test_a_vehicle_on_a_lane_that_fans_out_follows_sumos_choice_of_junction_lane() -> None:
+    """Bologna's 43[0]_1 fans out onto :34_0_1 (to 43[1]_1) and :34_0_2 (to
+    43[1]_2). A vehicle on it, its front 5 m in or more, whose best lanes
+    (SUMO's ``getBestLanes``: what SUMO's movement follows) continue onto
+    the other lane than its track's, is put on the track that takes that
+    one, from where it is; one whose best lanes agree with the track, or
+    whose front is not yet 5 m in, stays."""
+    from blendtrack.sumo.tracks import FANOUT_AFTER_M, Active
+
+    network = Network(BOLOGNA_NET)
+    fleet = RouteFleet()
+    tracks = Tracks(fleet, network, ControllerConfig(), 0.0)
+    geo, track = tracks.geometry(("43[0]", "43[1]"), 1)
+    ours = geo.fanout_next["43[0]_1"]
+    other = "43[1]_2" if ours == "43[1]_1" else "43[1]_1"
+
+    def vehicle_at(front_m: float) -> Active:
+        # The front at front_m along the track (43[0]_1 starts it), heading along it.
+        i = int(front_m) - 3
+        (x0, y0), (x1, y1) = geo.points[i], geo.points[i + 1]
+        theta = float(np.arctan2(y1 - y0, x1 - x0))
+        slot = fleet.add_vehicle(track, None, None, reach_m=3.0, length_m=4.5, min_gap_m=2.5,
+                                 x=float(x0), y=float(y0), theta=theta, v=10.0)
+        tracks.enter(track)
+        return Active(vid=f"v{slot}", slot=slot, geo=geo, route_id="r", record=None, track=track)  # type: ignore[arg-type]
+
+    def best(next_lane: str) -> list[tuple[object, ...]]:
+        return [("43[0]_0", 500.0, 1, 1, True, ("43[0]_0", "43[1]_0")),
+                ("43[0]_1", 1200.0, 0, 0, True, ("43[0]_1", next_lane))]
+
+    act = vehicle_at(12.0)
+    assert fleet.front_lane_position(act.slot)[1] >= FANOUT_AFTER_M
+    assert not tracks.follow_fanout(act, best(ours)) and act.geo is geo
+    assert tracks.follow_fanout(act, best(other))
+    assert act.geo is not geo and act.geo.fanout_next["43[0]_1"] == other
+    assert fleet.vehicle_track(act.slot) == act.track != track
+    assert fleet.front_lane_position(act.slot)[1] == pytest.approx(12.0, abs=0.5), "moved nowhere"
+    early = vehicle_at(4.0)
+    assert fleet.front_lane_position(early.slot)[1] < FANOUT_AFTER_M
+    assert not tracks.follow_fanout(early, best(other)) and early.geo is geo

@@ -121,6 +121,9 @@ class RouteGeometry:
     #: route, and a vehicle that could not change on that edge gets a new
     #: track on the next (``Tracks.retry_early_change``).
     pending_early: bool = False
+    #: Per lane of the track that fans out (``Network.fanouts``): the
+    #: track's next normal lane after it (``Tracks.geometry`` fills it).
+    fanout_next: dict[str, str] = field(default_factory=dict)
     #: Total arc length (m).
     length_m: float = 0.0
     #: SUMO's station at each point: the lane position SUMO gives a vehicle

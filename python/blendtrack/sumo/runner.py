@@ -74,7 +74,7 @@ from blendtrack.sumo.records import RunResult, SampleHistograms, Trace, VehicleR
 from blendtrack.sumo.scenario import Scenario
 from blendtrack.sumo.selection import Selection, parse_ids
 from blendtrack.sumo.stops import Stops
-from blendtrack.sumo.tracks import Active, Tracks
+from blendtrack.sumo.tracks import FANOUT_AFTER_M, Active, Tracks
 from blendtrack.sumo.vehicles import LEADER_RANGE_M, Controlled, SumoLeaders
 from blendtrack.sumo.zipper import Zippers
 
@@ -166,7 +166,11 @@ class SumoRun:
         self._steps = 0
         # Events with no per-vehicle record; collisions, teleports and red-light
         # crossings are summed from the records.
-        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "placement_faults": 0, "route_index_repairs": 0}
+        self.counts = {"vanished": 0, "takeover_failures": 0, "reroutes": 0, "collision_events": 0, "placement_faults": 0, "route_index_repairs": 0,
+                       "fanout_retracks": 0}
+        #: Per controlled vehicle: the lane that fans out it was last asked
+        #: about, and on which occurrence of its edge (``_follow_fanouts``).
+        self._fanout_asked: dict[str, tuple[str, int]] = {}
         self.placement = PlacementCheck(self.tracks.lanes.names, self.network)
         #: Vehicles whose route index was repaired, by the lane they were on
         #: then: moved by lane position, not (x, y), while on it.
@@ -191,6 +195,7 @@ class SumoRun:
         self.stops.drop(vid)
         self.placement.forget(vid)
         self.junctions.forget(vid)
+        self._fanout_asked.pop(vid, None)
 
     def _rebuild(self, act: Active) -> None:
         """The route changed (rerouting): a new track from where the vehicle is."""
@@ -291,6 +296,7 @@ class SumoRun:
             "moves_xy": self.moves["xy"],
             "moves_xy_on_track": self.moves["xy_on_track"],
             "reroutes": counts["reroutes"],
+            "fanout_retracks": counts["fanout_retracks"],
             "placement_faults": counts["placement_faults"],
             "route_index_repairs": counts["route_index_repairs"],
             "lane_changes_aborted": lanes["lane_changes_aborted"],
@@ -479,6 +485,7 @@ class SumoRun:
             retry = self.tracks.retry_early_change
             for act in list(self.tracks.early.values()):
                 retry(act)
+        self._follow_fanouts()
         index, lane_id = self.vehicles.index, self.tracks.lanes.id
         get_lane, get_pos = conn.get_lane_id, conn.get_lane_pos
         read = [(i, vid) for vid in self.vehicles.read_position if (i := index.get(vid)) is not None]
@@ -492,6 +499,30 @@ class SumoRun:
                 self._ask_leader(index[act.vid], pos, asked, leaders)
             self.lanes.changing_leaders(leaders, pos, index)
         return (asked, leaders), [i for i, _ in read], lanes, poss
+
+    def _follow_fanouts(self) -> None:
+        """Each controlled vehicle on a lane of its track that fans out is
+        asked once there (``getBestLanes``) which junction lane SUMO's
+        driver takes at its end, and put on the track that takes it
+        (``Tracks.follow_fanout``)."""
+        names, where = self.tracks.lanes.names, self.fleet.front_lane_position
+        for act in self.vehicles.order:
+            if not act.geo.fanout_next:
+                continue
+            lane_id, pos = where(act.slot)
+            lane = names[lane_id]
+            if lane not in act.geo.fanout_next or pos < FANOUT_AFTER_M:
+                continue
+            asked = (lane, self.fleet.occurrence(act.slot))
+            if self._fanout_asked.get(act.vid) == asked:
+                continue
+            self._fanout_asked[act.vid] = asked
+            try:
+                best = self.conn.sumo.vehicle.getBestLanes(act.vid)
+            except self.conn.errors:
+                continue
+            if self.tracks.follow_fanout(act, best):
+                self.counts["fanout_retracks"] += 1
 
     def _ask_leader(self, i: int, pos: dict[int, int], asked: list[int], leaders: list[Any]) -> int:
         """Where the leader of the vehicle at index ``i`` is in ``leaders``;

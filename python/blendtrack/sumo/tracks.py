@@ -34,6 +34,10 @@ IDLE_TRACK_S = 120.0
 #: on it (switched at 0.4 m in, a vehicle's rear axle projected before the
 #: track's start and SUMO lost it off the road a few seconds later).
 SHARE_AFTER_M = 15.0
+#: A vehicle on a lane that fans out is put on the track of SUMO's choice
+#: of junction lane (``Tracks.follow_fanout``) once its front is this far
+#: (m) into the lane: its rear axle then on the lane too.
+FANOUT_AFTER_M = 5.0
 
 _Key = tuple[tuple[str, ...], int, tuple[tuple[int, int], ...]]
 
@@ -181,6 +185,9 @@ class Tracks:
                 # (seeds 0-11: 0.491 -> 0.467 of plain's, 3 -> 14).
                 station_m=geo.station if geo.rounded and len(geo.station) else None,
             )
+            fanouts = network.fanouts()
+            normal = [x for x in dict.fromkeys(geo.piece_lane) if not x.startswith(":")]
+            geo.fanout_next = {a: b for a, b in zip(normal, normal[1:]) if a in fanouts}
             hit = (geo, track)
             if change is None:
                 self.geo_cache[key] = hit
@@ -251,14 +258,16 @@ class Tracks:
             return False
         return self.onto_shared_track(act, geo.pending_change[0] + 1) is not None
 
-    def onto_shared_track(self, act: Active, first_edge: int, stop_lane: tuple[str, int] | None = None) -> RouteGeometry | None:
+    def onto_shared_track(self, act: Active, first_edge: int, stop_lane: tuple[str, int] | None = None,
+                          after_m: float = SHARE_AFTER_M) -> RouteGeometry | None:
         """Puts ``act`` on the shared track of its route from the lane it is
         on, once blendtrack has its front ``SHARE_AFTER_M`` into a normal
         lane of its track's edge ``first_edge`` or a later one; with
         ``stop_lane`` (edge, lane index), the track that needs that lane at
         the next occurrence of that edge (``geometry``'s ``prefer``: a
         stop's lane). The track it is on then (moved only when that is
-        another), None when it was not put on one."""
+        another), None when it was not put on one. ``after_m``: how far into
+        the lane the front must be."""
         slot = act.slot
         k = self.fleet.occurrence(slot)
         edges = act.geo.edges
@@ -273,13 +282,39 @@ class Tracks:
         lane_id, pos = self.fleet.front_lane_position(slot)
         lane = self.lanes.names[lane_id]
         edge, _, index = lane.rpartition("_")
-        if lane.startswith(":") or edges[k] != edge or not index.isdigit() or pos < SHARE_AFTER_M:
+        if lane.startswith(":") or edges[k] != edge or not index.isdigit() or pos < after_m:
             return None
         geo, track = self.geometry(edges[k:], int(index), prefer=prefer)
         if geo is not act.geo:
             base = act.route_base + k
             self.retrack(act, geo, track, owned=False, base=base, route_index=base)
         return geo
+
+    def follow_fanout(self, act: Active, best_lanes: Any) -> bool:
+        """``act``'s front is on a lane of its track that fans out: where
+        SUMO's driver will take another junction lane at its end than the
+        track's (its best lanes' continuation, ``vehicle.getBestLanes``,
+        which is what SUMO's movement follows), the vehicle is put on the
+        track that takes that one. Otherwise SUMO carried it onto the other
+        junction lane and the next move by (x, y) put it back across onto
+        the track's, into whoever was there (Bologna, 30 %, seed 0, 290 s:
+        43[0]_1 onto :34_0_2 instead of :34_0_1, 2.5 m across onto 43[1]_1).
+        True when it was moved."""
+        if act.changing is not None or act.own_track is not None:
+            return False
+        lane_id, pos = self.fleet.front_lane_position(act.slot)
+        lane = self.lanes.names[lane_id]
+        ours = act.geo.fanout_next.get(lane)
+        if ours is None or pos < FANOUT_AFTER_M:
+            return False
+        sumo_next = next((bl[5][1] for bl in best_lanes if bl[0] == lane and len(bl[5]) > 1), None)
+        if sumo_next is None or sumo_next == ours:
+            return False
+        edge, _, index = sumo_next.rpartition("_")
+        if edge != ours.rpartition("_")[0] or not index.isdigit():
+            return False
+        moved = self.onto_shared_track(act, 0, (edge, int(index)), after_m=FANOUT_AFTER_M)
+        return moved is not None and moved.fanout_next.get(lane) == sumo_next
 
     def retrack(self, act: Active, geo: RouteGeometry, track: int, owned: bool, base: int, route_index: int | None = None) -> None:
         """Puts ``act`` on ``track`` (``owned``: built for it alone), whose
@@ -313,3 +348,4 @@ class Tracks:
         # A new route: SUMO's index on it is the only one there is.
         self.retrack(act, geo, track, owned=False, base=idx, route_index=idx)
         act.route_id = vehicle.getRouteID(act.vid)
+
