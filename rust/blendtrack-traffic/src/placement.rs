@@ -424,8 +424,9 @@ mod tests {
     fn a_front_far_off_its_track_is_put_on_the_track() {
         // The road's track runs along y = 0 heading east. A front 2.5 m off
         // it (more than XY_ON_TRACK_M) is given to the simulator at the
-        // track's point at the front's arc length, heading along the track;
-        // one 0.8 m off keeps its own place.
+        // track's point at the front's arc length, at the vehicle's own
+        // heading (the simulator draws the body back along it); one 0.8 m
+        // off keeps its own place.
         let (mut f, t) = fleet_on(road(None, true));
         let mut far = at(50.0, 10.0);
         far.y_m = 2.5;
@@ -441,7 +442,14 @@ mod tests {
             (out.x_front_m[0] - sf).abs() < 1e-6 && out.y_front_m[0].abs() < 1e-9,
             "{out:?}"
         );
-        assert!((out.angle_deg[0] - 90.0).abs() < 1e-9);
+        // Steering back toward the track, it heads off the track's
+        // direction (east, 90 deg): that heading is what is sent.
+        let th = f.state(a).unwrap().theta_rad;
+        assert!(th.abs() > 1e-3, "{th}");
+        assert!(
+            (out.angle_deg[0] - (90.0 - th.to_degrees())).abs() < 1e-9,
+            "{out:?}"
+        );
         let s = f.state(b).unwrap();
         assert!((out.y_front_m[1] - s.y_m - 3.5 * s.theta_rad.sin()).abs() < 1e-9);
         const { assert!(crate::step::XY_ON_TRACK_M > 0.8 && crate::step::XY_ON_TRACK_M < 2.5) };
@@ -630,6 +638,31 @@ mod tests {
             let crept = f.s_front(a).unwrap() - sf;
             assert!(crept.abs() < 1e-9, "{ahead} m ahead: crept {crept} m");
         }
+    }
+
+    #[test]
+    fn a_standing_vehicle_moved_by_xy_is_not_put_back_a_metre_behind_the_simulator() {
+        // As above, but the simulator has the front 1 m ahead (a crawl it
+        // ran ahead of, then a stop): the state goes on to where the
+        // simulator has it once, and stays there; put back, the car landed
+        // on the driver behind it (Eccles, seed 17, 342 s).
+        let (mut f, t) = fleet_on(road(None, true));
+        let mut st = at(50.0, 0.0);
+        st.y_m = 0.6;
+        let a = f.add_vehicle(t, None, None, body(), st, None).unwrap() as i64;
+        let sf = f.s_front(a).unwrap();
+        plan_one(&mut f, a, (1.0, 0.0), (10, sf + 1.0));
+        let out = f.step(&[], DT).unwrap();
+        assert_eq!((out.v_mps[0], out.moves[0]), (0.0, Move::Xy));
+        let moved = f.s_front(a).unwrap() - sf;
+        assert!((moved - 1.0).abs() < 1e-6, "moved {moved}");
+        assert!(out.x_front_m[0] >= sf + 1.0 - 1e-6, "{out:?}");
+        for _ in 0..3 {
+            let now = f.s_front(a).unwrap();
+            plan_one(&mut f, a, (1.0, 0.0), (10, now));
+            f.step(&[], DT).unwrap();
+        }
+        assert!((f.s_front(a).unwrap() - sf - 1.0).abs() < 1e-6);
     }
 
     #[test]
