@@ -74,7 +74,7 @@ from blendtrack.sumo.records import RunResult, SampleHistograms, Trace, VehicleR
 from blendtrack.sumo.scenario import Scenario
 from blendtrack.sumo.selection import Selection, parse_ids
 from blendtrack.sumo.stops import Stops
-from blendtrack.sumo.tracks import FANOUT_AFTER_M, Active, Tracks
+from blendtrack.sumo.tracks import Active, Tracks
 from blendtrack.sumo.vehicles import LEADER_RANGE_M, Controlled, SumoLeaders
 from blendtrack.sumo.zipper import Zippers
 
@@ -508,13 +508,10 @@ class SumoRun:
         lane (the loop over the vehicles cost 0.7 % of a grid run)."""
         if not self.network.fanouts():
             return
-        names, where = self.tracks.lanes.names, self.fleet.front_lane_position
+        fanout_lane = self.tracks.fanout_lane
         for act in self.vehicles.order:
-            if not act.geo.fanout_next:
-                continue
-            lane_id, pos = where(act.slot)
-            lane = names[lane_id]
-            if lane not in act.geo.fanout_next or pos < FANOUT_AFTER_M:
+            lane = fanout_lane(act)
+            if lane is None:
                 continue
             asked = (lane, self.fleet.occurrence(act.slot))
             if self._fanout_asked.get(act.vid) == asked:

@@ -290,6 +290,16 @@ class Tracks:
             self.retrack(act, geo, track, owned=False, base=base, route_index=base)
         return geo
 
+    def fanout_lane(self, act: Active) -> str | None:
+        """The lane of ``act``'s track that fans out its front is on, at
+        least ``FANOUT_AFTER_M`` into it (where ``follow_fanout`` acts), or
+        None."""
+        if not act.geo.fanout_next:
+            return None
+        lane_id, pos = self.fleet.front_lane_position(act.slot)
+        lane = self.lanes.names[lane_id]
+        return lane if lane in act.geo.fanout_next and pos >= FANOUT_AFTER_M else None
+
     def follow_fanout(self, act: Active, best_lanes: Any) -> bool:
         """``act``'s front is on a lane of its track that fans out: where
         SUMO's driver will take another junction lane at its end than the
@@ -300,13 +310,10 @@ class Tracks:
         the track's, into whoever was there (Bologna, 30 %, seed 0, 290 s:
         43[0]_1 onto :34_0_2 instead of :34_0_1, 2.5 m across onto 43[1]_1).
         True when it was moved."""
-        if act.changing is not None or act.own_track is not None:
+        lane = self.fanout_lane(act)
+        if lane is None or act.changing is not None or act.own_track is not None:
             return False
-        lane_id, pos = self.fleet.front_lane_position(act.slot)
-        lane = self.lanes.names[lane_id]
-        ours = act.geo.fanout_next.get(lane)
-        if ours is None or pos < FANOUT_AFTER_M:
-            return False
+        ours = act.geo.fanout_next[lane]
         sumo_next = next((bl[5][1] for bl in best_lanes if bl[0] == lane and len(bl[5]) > 1), None)
         if sumo_next is None or sumo_next == ours:
             return False
@@ -348,4 +355,3 @@ class Tracks:
         # A new route: SUMO's index on it is the only one there is.
         self.retrack(act, geo, track, owned=False, base=idx, route_index=idx)
         act.route_id = vehicle.getRouteID(act.vid)
-
