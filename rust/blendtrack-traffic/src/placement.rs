@@ -505,21 +505,11 @@ mod tests {
         let a = f
             .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
             .unwrap() as i64;
-        let slots = [a];
         let margin = f.settings().standstill_margin_m;
         for (gap, capped) in [(1.5, true), (5.0, false)] {
             let sf = f.s_front(a).unwrap();
             let known = sf - 2.0;
-            f.plan(&Observations {
-                slots: &slots,
-                leader_gap_m: &[gap],
-                leader_slot: &[-1],
-                leader_speed_mps: &[10.0],
-                lane: &[10],
-                lane_pos_m: &[known],
-                soft: None,
-            })
-            .unwrap();
+            plan_one(&mut f, a, (gap, 10.0), (10, known));
             let out = f.step(&[], DT).unwrap();
             assert_eq!(out.moves, [Move::Lane]);
             let want = f.s_front(a).unwrap() - out.v_mps[0] * DT;
