@@ -1905,27 +1905,29 @@ def test_a_sumo_leaders_stop_point_is_bounded_by_its_own_leader_at_long_steps() 
     # Nobody ahead of l1 within its brake gap: the Euler correction alone,
     # the stop point is gap + 8.5.
     sl, _, asked = _sumo_leaders(1.0, None)
-    (lid, gap), = sl.correct([("l1", 4.4)])
+    (lid, gap, room), = sl.correct([("l1", 4.4)])
     assert lid == "l1" and stop_of(gap) == pytest.approx(4.4 + 8.5)
+    # SUMO's own gap goes along, for the bound of a move by lane position.
+    assert room == 4.4
     assert asked == [pytest.approx(8.5)]
     # A vehicle cut in overlapping l1's front (getLeader gap -4.5) at 7.3 m/s:
     # l1's back stops by 4.4 + 2.5 - 4.5 + (7.3 - 4.5) = 5.2 m at the latest.
     sl, _, _ = _sumo_leaders(1.0, ("l2", -4.5))
-    (_, gap), = sl.correct([("l1", 4.4)])
+    (_, gap, _), = sl.correct([("l1", 4.4)])
     assert stop_of(gap) == pytest.approx(4.4 + 2.5 - 4.5 + 2.8)
     # A leader that cannot be passed through never moves l1 back.
     sl, conn, _ = _sumo_leaders(1.0, ("l2", -9.0))
     conn.vehicle.cars["l2"]["speed"] = 0.0
-    (_, gap), = sl.correct([("l1", 4.4)])
+    (_, gap, _), = sl.correct([("l1", 4.4)])
     assert stop_of(gap) == pytest.approx(4.4)
     # One further than l1 could get is no bound: the Euler correction stays.
     sl, _, _ = _sumo_leaders(1.0, ("l2", 8.0))
-    (_, gap), = sl.correct([("l1", 4.4)])
+    (_, gap, _), = sl.correct([("l1", 4.4)])
     assert stop_of(gap) == pytest.approx(4.4 + 8.5)
     # At 0.1 s steps the follower sees l1 brake a tenth of a second later:
     # nobody is asked, the Euler correction alone.
     sl, _, asked = _sumo_leaders(0.1, ("l2", -4.5))
-    (_, gap), = sl.correct([("l1", 4.4)])
+    (_, gap, _), = sl.correct([("l1", 4.4)])
     assert asked == [] and stop_of(gap) == pytest.approx(4.4 + euler_brake_gap(11.0, 4.5, 0.1))
     # Leaders blendtrack drives keep their gap; no leader stays none.
     sl, _, asked = _sumo_leaders(1.0, ("l2", -4.5))

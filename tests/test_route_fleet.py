@@ -133,7 +133,8 @@ def test_plan_sumo_reads_getleader_tuples_and_asks_for_background_speeds() -> No
 
 @pytest.mark.parametrize(
     "leaders, match",
-    [([("a", 1.0)], "has 1 entries, expected 2"), ([7, None], r"leaders\[0\]"), ([("a", "far"), None], "gap"), ([(1, 2.0), None], "id"), ([("a",), None], "items")],
+    [([("a", 1.0)], "has 1 entries, expected 2"), ([7, None], r"leaders\[0\]"), ([("a", "far"), None], "gap"), ([(1, 2.0), None], "id"), ([("a",), None], "items"),
+     ([("a", 1.0, "near"), None], "room"), ([("a", 1.0, 2.0, 3.0), None], "3 .id, gap, room.")],
 )
 def test_plan_sumo_rejects_malformed_leaders(leaders, match) -> None:  # type: ignore[no-untyped-def]
     f, track = _fleet()
@@ -141,6 +142,9 @@ def test_plan_sumo_rejects_malformed_leaders(leaders, match) -> None:  # type: i
     with pytest.raises(blendtrack.InputError, match=match):
         f.plan_sumo(s, leaders, lambda vid: 0.0)
     f.plan_sumo(s, [None, None], lambda vid: 0.0, [1], [0], [3.0])
+    assert len(f.step([], 0.1)["move"]) == 2
+    # SUMO's own gap may follow a shortened one.
+    f.plan_sumo(s, [("a", 1.0, 4.0), None], lambda vid: 0.0)
     assert len(f.step([], 0.1)["move"]) == 2
 
 

@@ -333,7 +333,7 @@ class RouteFleet:
     def plan_sumo(
         self,
         slots: _ArrayLike,
-        leaders: Sequence[tuple[str, float] | None],
+        leaders: Sequence[tuple[str, float] | tuple[str, float, float] | None],
         speed_of: Callable[[str], float],
         read_index: _ArrayLike | None = None,
         read_lane: _ArrayLike | None = None,

@@ -75,7 +75,8 @@ class SumoLeaders:
 
     def correct(self, leaders: list[Any]) -> list[Any]:
         """``leaders`` (``getLeader`` results: None or (id, gap)) with each gap
-        to a vehicle SUMO drives shortened; the list itself is updated.
+        to a vehicle SUMO drives shortened, as (id, shortened gap, SUMO's
+        gap); the list itself is updated.
 
         At steps of ``HOLD_BRAKING_MIN_STEP_S`` or more the leader's stop
         point is also bounded by its own leader's (``second_leader_stop``)."""
@@ -96,7 +97,14 @@ class SumoLeaders:
                     # Its stop point, max(gap, bound), as the law sees it.
                     short = gap + v * v / (2.0 * b) - max(gap, bound)
             if short > 0.0:
-                leaders[k] = (lid, gap - short)
+                # SUMO's own gap goes along: it bounds a move by lane
+                # position (SUMO puts the vehicle there before anyone
+                # moves). Bounded by the shortened gap, a controlled car
+                # just inserted behind a queue at Eccles (seed 13, 24 s)
+                # braked 3.7 m in blendtrack but stood in SUMO, and the
+                # controlled car inserted behind it, planning with the
+                # leader's advance, ran into it.
+                leaders[k] = (lid, gap - short, gap)
         return leaders
 
     def second_leader_stop(self, lid: str, gap: float, brake: float) -> float:

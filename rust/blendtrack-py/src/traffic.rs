@@ -548,6 +548,7 @@ impl RouteFleet {
             leader_gap_m: &lg,
             leader_slot: &ls,
             leader_speed_mps: &lv,
+            leader_room_m: None,
             lane: &ln,
             lane_pos_m: &lp,
             soft: None,
@@ -557,7 +558,10 @@ impl RouteFleet {
 
     /// `plan` with the leaders as SUMO's `vehicle.getLeader` gives them: one
     /// entry per slot, `None` or `(leader id, gap)` (an empty id, or a gap
-    /// below -100 m, is no leader). A leader added here with its `name` is
+    /// below -100 m, is no leader), or `(leader id, gap, room)` where the
+    /// caller shortened SUMO's gap for the stopping law: `room` is SUMO's own,
+    /// which bounds only how far a move by lane position may put the vehicle
+    /// (SUMO puts it there before anyone moves). A leader added here with its `name` is
     /// known by its slot; for any other `speed_of(leader id)` is called (a
     /// leader whose speed cannot be read counts as standing). The lanes and
     /// lane positions read from the simulator are given sparsely: for the
@@ -594,6 +598,7 @@ impl RouteFleet {
         let mut gaps = vec![f64::NAN; n];
         let mut lslots = vec![-1i64; n];
         let mut lspeeds = vec![f64::NAN; n];
+        let mut rooms = vec![f64::NAN; n];
         let listed = self.listed.take();
         let at: Vec<usize> = match &leader_index {
             None => {
@@ -642,9 +647,9 @@ impl RouteFleet {
             let t = item.cast::<PyTuple>().map_err(|_| {
                 input_error(format!("leaders[{k}] is not None or an (id, gap) tuple"))
             })?;
-            if t.len() != 2 {
+            if t.len() != 2 && t.len() != 3 {
                 return Err(input_error(format!(
-                    "leaders[{k}] has {} items, expected 2 (id, gap)",
+                    "leaders[{k}] has {} items, expected 2 (id, gap) or 3 (id, gap, room)",
                     t.len()
                 )));
             }
@@ -658,6 +663,11 @@ impl RouteFleet {
                 .map_err(|_| input_error(format!("leaders[{k}]: the gap is not a number")))?;
             if let Some((slot, speed)) = self.leader_of(id, gap, speed_of)? {
                 (gaps[i], lslots[i], lspeeds[i]) = (gap, slot, speed);
+                if t.len() == 3 {
+                    rooms[i] = t.get_item(2)?.extract().map_err(|_| {
+                        input_error(format!("leaders[{k}]: the room is not a number"))
+                    })?;
+                }
             }
         }
         let mut ln = vec![-1i64; n];
@@ -679,6 +689,7 @@ impl RouteFleet {
             leader_gap_m: &gaps,
             leader_slot: &lslots,
             leader_speed_mps: &lspeeds,
+            leader_room_m: Some(&rooms),
             lane: &ln,
             lane_pos_m: &lp,
             soft: soft.as_ref().map(|(g, s, v)| SoftLeaders {

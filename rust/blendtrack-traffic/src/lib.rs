@@ -855,6 +855,7 @@ mod tests {
             leader_gap_m: &[f64::NAN, f64::NAN][..slots.len()],
             leader_slot: &[-1, -1][..slots.len()],
             leader_speed_mps: &[f64::NAN, f64::NAN][..slots.len()],
+            leader_room_m: None,
             lane: &[-1, -1][..slots.len()],
             lane_pos_m: &[f64::NAN, f64::NAN][..slots.len()],
             soft: None,

@@ -469,6 +469,7 @@ mod tests {
                 leader_gap_m: &[f64::NAN],
                 leader_slot: &[-1],
                 leader_speed_mps: &[f64::NAN],
+                leader_room_m: None,
                 lane: &[10],
                 lane_pos_m: &[pos],
                 soft: None,
@@ -523,6 +524,42 @@ mod tests {
                 assert!((out.lane_pos_m[0] - want).abs() < 1e-9, "{out:?}");
             }
         }
+    }
+
+    #[test]
+    fn a_placement_is_bounded_by_the_simulators_gap_not_the_stopping_laws() {
+        // The bridge shortens the gap to a leader SUMO drives (1.5 m) for
+        // the stopping law and hands SUMO's own (5 m) along: the law brakes
+        // for the shortened gap, but the move puts the front where
+        // blendtrack has it, as with a leader 5 m ahead. Held at the
+        // shortened gap, the vehicle stood in SUMO while blendtrack moved
+        // it on, and a controlled follower planning with that advance ran
+        // into it (Eccles, seed 13, 24 s).
+        let run = |room: f64| {
+            let (mut f, t) = fleet_on(road(None, true));
+            let a = f
+                .add_vehicle(t, None, None, body(), at(50.0, 10.0), None)
+                .unwrap() as i64;
+            let known = f.s_front(a).unwrap() - 2.0;
+            plan_one_with_room(&mut f, a, (1.5, 10.0), room, (10, known));
+            let out = f.step(&[], DT).unwrap();
+            assert_eq!(out.moves, [Move::Lane]);
+            let want = f.s_front(a).unwrap() - out.v_mps[0] * DT;
+            let margin = f.settings().standstill_margin_m;
+            (out.v_mps[0], out.lane_pos_m[0], want, known - margin)
+        };
+        let (v_short, pos_short, want_short, known_less_margin) = run(f64::NAN);
+        assert!(want_short > known_less_margin + 1.5);
+        assert!((pos_short - (known_less_margin + 1.5)).abs() < 1e-9);
+        let (v_room, pos_room, want_room, _) = run(5.0);
+        assert_eq!(v_room, v_short, "the law takes the shortened gap");
+        assert!(
+            (pos_room - want_room).abs() < 1e-9,
+            "{pos_room} {want_room}"
+        );
+        // A room shorter than the gap is no room: the gap bounds.
+        let (_, pos_less, _, _) = run(1.0);
+        assert!((pos_less - pos_short).abs() < 1e-12);
     }
 
     #[test]

@@ -20,6 +20,13 @@ pub struct Observations<'a> {
     pub leader_slot: &'a [i64],
     /// The leader's speed when it is not driven here (m/s; NaN = unknown: standing).
     pub leader_speed_mps: &'a [f64],
+    /// The simulator's own gap to the leader where `leader_gap_m` is shorter
+    /// (the bridge shortens gaps to leaders it drives for what the stopping
+    /// law's picture of their braking misses); None or NaN: `leader_gap_m`.
+    /// Only a move by lane position is bounded by it (the simulator puts the
+    /// vehicle there before anyone moves): the stopping law takes the
+    /// shortened gap.
+    pub leader_room_m: Option<&'a [f64]>,
     /// The simulator's lane and lane position of the front, where the bridge
     /// read them (`lane` < 0 where not read).
     pub lane: &'a [i64],
@@ -46,6 +53,9 @@ pub struct SoftLeaders<'a> {
 pub(crate) struct Plan {
     pub(crate) slots: Vec<i64>,
     pub(crate) leader_gap: Vec<f64>,
+    /// How far the front may be put before the leader as it stands (the
+    /// simulator's gap less the standstill margin; NaN: no leader).
+    pub(crate) leader_room: Vec<f64>,
     pub(crate) leader_speed: Vec<f64>,
     /// The leader is driven by the simulator, not here: over a long step its
     /// worst stop point is held (see [`crate::substep::leader_advance_speed`]).
@@ -109,6 +119,7 @@ impl RouteFleet {
         let mut plan = Plan {
             slots: obs.slots.to_vec(),
             leader_gap: vec![f64::NAN; n],
+            leader_room: vec![f64::NAN; n],
             leader_speed: vec![f64::NAN; n],
             leader_external: vec![false; n],
             leader_entry: vec![NO_ENTRY; n],
@@ -135,6 +146,9 @@ impl RouteFleet {
         check_len("leader_gap", n, obs.leader_gap_m.len())?;
         check_len("leader_slot", n, obs.leader_slot.len())?;
         check_len("leader_speed", n, obs.leader_speed_mps.len())?;
+        if let Some(room) = obs.leader_room_m {
+            check_len("leader_room", n, room.len())?;
+        }
         check_len("lane", n, obs.lane.len())?;
         check_len("lane_pos", n, obs.lane_pos_m.len())?;
         if let Some(sl) = &obs.soft {
@@ -160,6 +174,8 @@ impl RouteFleet {
             // The simulator's gap leaves out minGap, and the simulator
             // counts anything closer as a collision: stop further back.
             plan.leader_gap[i] = gap - margin;
+            let room = obs.leader_room_m.map_or(f64::NAN, |r| r[i]);
+            plan.leader_room[i] = if room > gap { room } else { gap } - margin;
             plan.leader_speed[i] = self.speed_of(obs.leader_slot[i], obs.leader_speed_mps[i]);
             plan.leader_external[i] = self.driven_at(obs.leader_slot[i]).is_none();
         }
@@ -649,6 +665,7 @@ mod tests {
                 leader_gap_m: &[12.0],
                 leader_slot: &[leader_slot],
                 leader_speed_mps: &[f64::NAN],
+                leader_room_m: None,
                 lane: &[-1],
                 lane_pos_m: &[f64::NAN],
                 soft: None,
@@ -746,6 +763,7 @@ mod tests {
                 leader_gap_m: &[f64::NAN],
                 leader_slot: &[-1],
                 leader_speed_mps: &[f64::NAN],
+                leader_room_m: None,
                 lane: &[-1],
                 lane_pos_m: &[f64::NAN],
                 soft: Some(SoftLeaders {

@@ -316,8 +316,8 @@ impl RouteFleet {
             v_mps: v,
             s_front_m: sf_new,
             dt_s,
-            leader_room_m: if plan.leader_gap[i].is_finite() {
-                plan.leader_gap[i]
+            leader_room_m: if plan.leader_room[i].is_finite() {
+                plan.leader_room[i]
             } else {
                 f64::INFINITY
             },

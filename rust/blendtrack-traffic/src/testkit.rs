@@ -110,6 +110,7 @@ pub(crate) fn step(
             leader_gap_m: &nan,
             leader_slot: &vec![-1; n],
             leader_speed_mps: &nan,
+            leader_room_m: None,
             lane: &vec![-1; n],
             lane_pos_m: &nan,
             soft: None,
@@ -181,11 +182,24 @@ pub(crate) fn plan_one(
     leader: (f64, f64),
     at: (i64, f64),
 ) -> Vec<usize> {
+    plan_one_with_room(f, slot, leader, f64::NAN, at)
+}
+
+/// [`plan_one`] with the simulator's own gap to the leader, `room` (m), where
+/// the leader's gap is shortened for the stopping law (NaN: not shortened).
+pub(crate) fn plan_one_with_room(
+    f: &mut RouteFleet,
+    slot: i64,
+    leader: (f64, f64),
+    room: f64,
+    at: (i64, f64),
+) -> Vec<usize> {
     f.plan(&Observations {
         slots: &[slot],
         leader_gap_m: &[leader.0],
         leader_slot: &[-1],
         leader_speed_mps: &[leader.1],
+        leader_room_m: Some(&[room]),
         lane: &[at.0],
         lane_pos_m: &[at.1],
         soft: None,
