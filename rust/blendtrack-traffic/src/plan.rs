@@ -174,8 +174,9 @@ impl RouteFleet {
             // The simulator's gap leaves out minGap, and the simulator
             // counts anything closer as a collision: stop further back.
             plan.leader_gap[i] = gap - margin;
+            // A room shorter than the gap, or none (NaN), leaves the gap.
             let room = obs.leader_room_m.map_or(f64::NAN, |r| r[i]);
-            plan.leader_room[i] = if room > gap { room } else { gap } - margin;
+            plan.leader_room[i] = gap.max(room) - margin;
             plan.leader_speed[i] = self.speed_of(obs.leader_slot[i], obs.leader_speed_mps[i]);
             plan.leader_external[i] = self.driven_at(obs.leader_slot[i]).is_none();
         }
