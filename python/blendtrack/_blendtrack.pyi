@@ -124,6 +124,7 @@ class ControllerConfig:
     curve_deceleration: float
     curve_with_ray: bool
     curve_smoothing_m: float
+    curve_lift_min_limit_mps: float
     alpha_mode: str
     auto_alpha_forward: float
     auto_alpha_backward: float

@@ -126,6 +126,13 @@ pub struct ControllerConfig {
     /// be driven as the paper's law drives it. False: the curve speeds
     /// replace the ray cast.
     pub curve_with_ray: bool,
+    /// With `curve_with_ray`: the curve speeds lift the ray's cap only where
+    /// the speed limit the step is given ([`crate::Controller::step_limited`])
+    /// is at least this (m/s, >= 0); under it the ray cast alone drives, as
+    /// the paper's law does. 0 (default): wherever the curve speeds apply,
+    /// and wherever no limit is given. The SUMO runs' `auto` corridor: town
+    /// streets keep the paper's corridor, faster roads get the lift.
+    pub curve_lift_min_limit_mps: f64,
 
     // ---- Automatic alpha (beyond the paper; see `lateral::auto_alpha`) ----
     /// "fixed" (default) or "auto".
@@ -184,6 +191,7 @@ impl Default for ControllerConfig {
             curve_lateral_accel: 0.0,
             curve_deceleration: -2.0,
             curve_with_ray: false,
+            curve_lift_min_limit_mps: 0.0,
             curve_smoothing_m: 0.0,
             border_margin_m: 0.0,
             ray_horizon_m: 200.0,
@@ -303,6 +311,7 @@ impl ControllerConfig {
         negative("emergency_deceleration", self.emergency_deceleration)?;
         non_negative("curve_lateral_accel", self.curve_lateral_accel)?;
         non_negative("curve_smoothing_m", self.curve_smoothing_m)?;
+        non_negative("curve_lift_min_limit_mps", self.curve_lift_min_limit_mps)?;
         negative("curve_deceleration", self.curve_deceleration)?;
         Ok(())
     }

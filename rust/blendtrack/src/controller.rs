@@ -211,11 +211,24 @@ impl Controller {
         speed_limit_mps: Option<f64>,
     ) -> Result<ControlOutput, StateError> {
         match speed_limit_mps {
-            Some(limit) if limit > 0.0 && limit < self.cfg.preferred_speed => {
-                let saved = self.cfg.preferred_speed;
-                self.cfg.preferred_speed = limit;
+            Some(limit) if limit > 0.0 => {
+                // Under `curve_lift_min_limit_mps` the curve speeds do not
+                // lift the ray's cap: the ray cast alone (curves off).
+                let unlifted = self.cfg.curve_with_ray && limit < self.cfg.curve_lift_min_limit_mps;
+                let capped = limit < self.cfg.preferred_speed;
+                if !(unlifted || capped) {
+                    return self.step_along(measured, heading, alpha, obstacles);
+                }
+                let (saved_v0, saved_ay) = (self.cfg.preferred_speed, self.cfg.curve_lateral_accel);
+                if capped {
+                    self.cfg.preferred_speed = limit;
+                }
+                if unlifted {
+                    self.cfg.curve_lateral_accel = 0.0;
+                }
                 let out = self.step_along(measured, heading, alpha, obstacles);
-                self.cfg.preferred_speed = saved;
+                self.cfg.preferred_speed = saved_v0;
+                self.cfg.curve_lateral_accel = saved_ay;
                 out
             }
             _ => self.step_along(measured, heading, alpha, obstacles),
@@ -541,5 +554,84 @@ mod tests {
         }
         assert_eq!(steady_intervals(0.0, 1000.0), 256);
         assert_eq!(steady_intervals(5.0, 5.0), 1);
+    }
+
+    /// On a circle of R = 200 m in a lane of half width 1.75 m the ray's
+    /// stopping law settles at 11.2 m/s and the curve speed at 2 m/s^2 is
+    /// 20 m/s: at 15 m/s the paper's law brakes and the lifted one does not.
+    /// Under `curve_lift_min_limit_mps` the lifted controller's output is the
+    /// paper's (ray cast alone) bit for bit; at or above it, and without a
+    /// limit, it is the lifted one's; the configuration is as it was after.
+    #[test]
+    fn the_curve_lift_applies_only_at_or_above_its_speed_limit() {
+        let path = Path::circle(200.0, 1e-4).unwrap();
+        let base = ControllerConfig {
+            preferred_speed: 30.0,
+            path_width_m: 3.5,
+            ..Default::default()
+        };
+        let lifted = ControllerConfig {
+            curve_lateral_accel: 2.0,
+            curve_with_ray: true,
+            ..base.clone()
+        };
+        let gated = ControllerConfig {
+            curve_lift_min_limit_mps: 60.0 / 3.6,
+            ..lifted.clone()
+        };
+        let make = |cfg: &ControllerConfig| {
+            let track = Arc::new(Track::new(path.clone(), cfg));
+            Controller::new(track, cfg.clone(), &VehicleParams::default()).unwrap()
+        };
+        let p0 = path.point_at(0.0);
+        let state = VehicleState {
+            x_m: p0.x,
+            y_m: p0.y,
+            theta_rad: path.heading_at(0.0),
+            v_mps: 15.0,
+            delta_rad: 0.0,
+        };
+        let bits = |o: &ControlOutput| (o.accel_mps2.to_bits(), o.steering_rad.to_bits());
+        for limit in [13.9, 16.0] {
+            let paper = make(&base)
+                .step_limited(&state, 0.5, &[], Some(limit))
+                .unwrap();
+            let mut c = make(&gated);
+            let out = c.step_limited(&state, 0.5, &[], Some(limit)).unwrap();
+            assert_eq!(bits(&out), bits(&paper), "limit {limit}");
+            assert!(
+                paper.accel_mps2 < 0.0,
+                "the ray brakes at 15 m/s: {}",
+                paper.accel_mps2
+            );
+            assert_eq!(c.config().curve_lateral_accel, 2.0);
+            assert_eq!(c.config().preferred_speed, 30.0);
+        }
+        for limit in [Some(60.0 / 3.6), Some(25.0), None] {
+            let lift = make(&lifted).step_limited(&state, 0.5, &[], limit).unwrap();
+            let out = make(&gated).step_limited(&state, 0.5, &[], limit).unwrap();
+            assert_eq!(bits(&out), bits(&lift), "limit {limit:?}");
+            assert!(
+                lift.accel_mps2 > 0.0,
+                "lifted at 15 m/s under 20: {}",
+                lift.accel_mps2
+            );
+        }
+        // Without `curve_with_ray` the key changes nothing (the arc corridor).
+        let arc = ControllerConfig {
+            curve_with_ray: false,
+            ..gated.clone()
+        };
+        let arc_plain = ControllerConfig {
+            curve_with_ray: false,
+            ..lifted
+        };
+        let a = make(&arc)
+            .step_limited(&state, 0.5, &[], Some(13.9))
+            .unwrap();
+        let b = make(&arc_plain)
+            .step_limited(&state, 0.5, &[], Some(13.9))
+            .unwrap();
+        assert_eq!(bits(&a), bits(&b));
     }
 }
