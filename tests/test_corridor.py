@@ -2,7 +2,9 @@
 limits the speed in curves. "lane" (the default) is the paper's ray cast
 against the lane's half width; "arc" previews the curve speeds
 sqrt(a_y / |kappa|) along the path; "road" takes the faster of the two;
-"carriageway" is the ray cast against the whole road."""
+"auto" is "road" (its curve speeds at half the comfort bound) where the
+lane's limit is 60 km/h or more and "lane" under it; "carriageway" is the
+ray cast against the whole road."""
 
 from __future__ import annotations
 
@@ -148,7 +150,7 @@ def test_the_arc_and_road_corridors_are_faster_than_the_lane_on_the_rural_loop(t
     test_rural_loop_tracks_lanes_within_comfort)."""
     sc = sumo.resolve_scenario("rural_loop")
     results = {}
-    for corridor in ("lane", "arc", "road"):
+    for corridor in ("lane", "arc", "road", "auto"):
         opts = RunOptions(end_s=150, progress=False, corridor=corridor)
         results[corridor] = sumo.run_scenario(sc, opts, tmp_path / corridor)
     arc, lane, road = results["arc"], results["lane"], results["road"]
@@ -184,10 +186,57 @@ def test_the_arc_and_road_corridors_are_faster_than_the_lane_on_the_rural_loop(t
     with open(tmp_path / "road" / "vehicles.csv") as f:
         worst = max(float(r["lateral_accel_max_mps2"]) for r in csv.DictReader(f))
     assert worst < 1.4 * sc.comfort_lateral_accel_mps2, worst
+    # "auto" is "road" on a road of 90 km/h, its curve speeds planned at half
+    # the comfort bound: faster than the lane's ray law, within the bound.
+    auto = results["auto"]
+    assert auto.summary["corridor"] == "auto" and auto.summary["collisions"] == 0
+    assert _mean_speed(auto) > 1.1 * _mean_speed(lane), (_mean_speed(auto), _mean_speed(lane))
+    with open(tmp_path / "auto" / "vehicles.csv") as f:
+        worst = max(float(r["lateral_accel_max_mps2"]) for r in csv.DictReader(f))
+    assert worst < sc.comfort_lateral_accel_mps2, worst
+
+
+def test_the_auto_corridor_lifts_at_half_the_comfort_bound_from_60_kmh() -> None:
+    """The configuration each corridor gives a run (Selection.base_config):
+    "auto" is "road" with the lift gated at 60 km/h and its curve speeds at
+    half the scenario's comfort bound; keys the user fixed are kept."""
+    from types import SimpleNamespace
+
+    from blendtrack import ControllerConfig
+    from blendtrack.sumo.options import AUTO_LIFT_COMFORT_FRACTION, AUTO_LIFT_MIN_LIMIT_MPS
+    from blendtrack.sumo.selection import Selection
+
+    conn = SimpleNamespace(scenario=SimpleNamespace(comfort_lateral_accel_mps2=2.4))
+    cfg = {c: Selection(RunOptions(corridor=c), conn).base_config for c in ("lane", "road", "auto")}  # type: ignore[arg-type]
+    assert (AUTO_LIFT_COMFORT_FRACTION, AUTO_LIFT_MIN_LIMIT_MPS) == (0.5, pytest.approx(16.6667, abs=1e-4))
+    assert cfg["auto"].curve_lateral_accel == pytest.approx(1.2) and cfg["road"].curve_lateral_accel == pytest.approx(2.4)
+    assert cfg["auto"].curve_with_ray and cfg["road"].curve_with_ray and not cfg["lane"].curve_with_ray
+    assert cfg["auto"].curve_lift_min_limit_mps == pytest.approx(60.0 / 3.6)
+    assert cfg["road"].curve_lift_min_limit_mps == 0.0 and cfg["lane"].curve_lateral_accel == 0.0
+    assert cfg["auto"].curve_smoothing_m == cfg["road"].curve_smoothing_m > 0.0
+    # A value of the user's --config stays.
+    mine = ControllerConfig().replace(curve_lateral_accel=3.0, curve_lift_min_limit_mps=30.0)
+    opts = RunOptions(corridor="auto", config=mine, fixed_keys=frozenset({"curve_lateral_accel", "curve_lift_min_limit_mps"}))
+    fixed = Selection(opts, conn).base_config  # type: ignore[arg-type]
+    assert fixed.curve_lateral_accel == 3.0 and fixed.curve_lift_min_limit_mps == 30.0
+
+
+def test_the_auto_corridor_is_the_papers_on_town_streets(tmp_path: Path) -> None:
+    """On the urban grid (every lane 50 km/h, under the 60 km/h from which
+    "auto" lifts the ray's cap) "auto" drives as "lane" does, row for row,
+    and "road" does not (its curve speeds lift the cap in the turns)."""
+    sc = sumo.resolve_scenario("urban_grid")
+    rows = {}
+    for corridor in ("lane", "auto", "road"):
+        opts = RunOptions(end_s=90, progress=False, corridor=corridor, controlled_fraction=0.5)
+        sumo.run_scenario(sc, opts, tmp_path / corridor)
+        rows[corridor] = (tmp_path / corridor / "vehicles.csv").read_bytes()
+    assert rows["auto"] == rows["lane"]
+    assert rows["road"] != rows["lane"]
 
 
 def test_a_corridor_that_does_not_exist_is_an_error() -> None:
-    with pytest.raises(sumo.ScenarioError, match="corridor 'motorway': must be one of lane, arc, road, carriageway"):
+    with pytest.raises(sumo.ScenarioError, match="corridor 'motorway': must be one of lane, arc, road, auto, carriageway"):
         RunOptions(corridor="motorway")
 
 

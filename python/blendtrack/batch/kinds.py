@@ -134,7 +134,7 @@ def _run_options(task: dict[str, Any]) -> Any:
         controlled_type=p.get("controlled_type"),
         max_controlled=p.get("max_controlled"),
         border_margin_m=p.get("border_margin_m", 0.0),
-        corridor=p.get("corridor", "lane"),
+        corridor=p.get("corridor", sumo.RunOptions.corridor),
         stop_at_route_end=p.get("stop_at_route_end", False),
         tactical_lane_changes=p.get("tactical_lane_changes", False),
         open_gaps=p.get("open_gaps", True),

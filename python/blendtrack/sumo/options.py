@@ -12,7 +12,18 @@ from blendtrack.sumo.scenario import ScenarioError
 
 
 #: The corridors a SUMO run can use (``RunOptions.corridor``).
-CORRIDORS = ("lane", "arc", "road", "carriageway")
+CORRIDORS = ("lane", "arc", "road", "auto", "carriageway")
+#: The ``auto`` corridor lifts the ray's cap with the curve speeds (as
+#: ``road``) only where the lane's speed limit is at least this (m/s, 60 km/h):
+#: town streets (50 km/h and under) keep the paper's ``lane`` corridor
+#: (docs/sumo.md, "Curves").
+AUTO_LIFT_MIN_LIMIT_MPS = 60.0 / 3.6
+#: The ``auto`` corridor plans its curve speeds at this fraction of the
+#: scenario's comfort bound: the tracking lags where SUMO's arcs begin
+#: without a clothoid, and the rural loop's peaks were 2.5-2.65 m/s^2 with
+#: the curve speeds at the bound of 2, 2.24 at 0.75 of it, 2.06 at 0.6
+#: (docs/sumo.md, "Curves").
+AUTO_LIFT_COMFORT_FRACTION = 0.5
 
 
 @dataclass
@@ -70,7 +81,9 @@ class RunOptions:
     #: scenario's comfort bound on lateral acceleration; "lane" (the default) the paper's
     #: virtual borders at the lane's half width (plus ``border_margin_m``) and
     #: its ray cast; "road" the faster of "lane" and "arc" (config
-    #: ``curve_with_ray``); "carriageway" the same ray cast with the borders at the
+    #: ``curve_with_ray``); "auto" "road" where the lane's speed
+    #: limit is at least ``AUTO_LIFT_MIN_LIMIT_MPS`` and "lane" under it (config
+    #: ``curve_lift_min_limit_mps``); "carriageway" the same ray cast with the borders at the
     #: edges of the lane's whole edge (junction lanes keep their half width).
     corridor: str = "lane"
     #: Stop at the end of the route (a standing obstacle there). By default

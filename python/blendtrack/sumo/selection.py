@@ -12,7 +12,7 @@ from typing import Any
 import blendtrack
 from blendtrack import ControllerConfig, VehicleParams
 from blendtrack.sumo.connection import SumoConnection
-from blendtrack.sumo.options import RunOptions
+from blendtrack.sumo.options import AUTO_LIFT_COMFORT_FRACTION, AUTO_LIFT_MIN_LIMIT_MPS, RunOptions
 from blendtrack.sumo.scenario import ScenarioError
 
 #: vType parameter that marks a type as controlled.
@@ -71,17 +71,23 @@ class Selection:
         )
         self.base_vehicle = options.vehicle or VehicleParams()
         self.base_config = self.base_config.with_alpha(options.alpha)
-        curves = options.corridor in ("arc", "road")
+        curves = options.corridor in ("arc", "road", "auto")
+        lifted = options.corridor in ("road", "auto")
         if "curve_lateral_accel" not in options.fixed_keys:
             # The arc and road corridors keep to the scenario's comfort bound;
             # the others are the paper's ray cast (curve_lateral_accel 0).
             a_y = conn.scenario.comfort_lateral_accel_mps2 if curves else 0.0
+            if options.corridor == "auto":
+                a_y *= AUTO_LIFT_COMFORT_FRACTION
             self.base_config = self.base_config.replace(curve_lateral_accel=a_y)
         if "curve_with_ray" not in options.fixed_keys:
             # road: the faster of the ray cast and the curve speeds.
-            self.base_config = self.base_config.replace(curve_with_ray=options.corridor == "road")
-        if options.corridor == "road" and "curve_smoothing_m" not in options.fixed_keys:
+            self.base_config = self.base_config.replace(curve_with_ray=lifted)
+        if lifted and "curve_smoothing_m" not in options.fixed_keys:
             self.base_config = self.base_config.replace(curve_smoothing_m=CURVE_SMOOTHING_M)
+        if options.corridor == "auto" and "curve_lift_min_limit_mps" not in options.fixed_keys:
+            # Town streets keep the paper's corridor; faster roads get the lift.
+            self.base_config = self.base_config.replace(curve_lift_min_limit_mps=AUTO_LIFT_MIN_LIMIT_MPS)
         self._types: dict[str, dict[str, Any]] = {}
         #: The vTypes --controlled-type stands for (a distribution: its members).
         self.controlled_types: set[str] = set()
