@@ -235,6 +235,24 @@ def test_the_auto_corridor_is_the_papers_on_town_streets(tmp_path: Path) -> None
     assert rows["road"] != rows["lane"]
 
 
+def test_the_cli_and_the_sweeps_offer_the_corridors_runs_know() -> None:
+    """`--corridor` and the sweep parameter `corridor` list their choices
+    themselves (importing the SUMO bridge for them would add its start-up
+    to every `blendtrack` command and batch worker): they must be
+    RunOptions' own."""
+    import argparse
+
+    from blendtrack.batch.sweep import PARAMS
+    from blendtrack.cli.sumo import _add_driving_options
+    from blendtrack.sumo.options import CORRIDORS
+
+    parser = argparse.ArgumentParser()
+    _add_driving_options(parser)
+    cli = next(a for a in parser._actions if a.dest == "corridor")
+    assert tuple(cli.choices or ()) == CORRIDORS and cli.default == RunOptions.corridor
+    assert PARAMS["corridor"].choices == CORRIDORS
+
+
 def test_a_corridor_that_does_not_exist_is_an_error() -> None:
     with pytest.raises(sumo.ScenarioError, match="corridor 'motorway': must be one of lane, arc, road, auto, carriageway"):
         RunOptions(corridor="motorway")

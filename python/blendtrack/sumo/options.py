@@ -81,7 +81,8 @@ class RunOptions:
     #: scenario's comfort bound on lateral acceleration; "lane" (the default) the paper's
     #: virtual borders at the lane's half width (plus ``border_margin_m``) and
     #: its ray cast; "road" the faster of "lane" and "arc" (config
-    #: ``curve_with_ray``); "auto" "road" where the lane's speed
+    #: ``curve_with_ray``); "auto" "road" (its curve speeds at
+    #: ``AUTO_LIFT_COMFORT_FRACTION`` of the comfort bound) where the lane's speed
     #: limit is at least ``AUTO_LIFT_MIN_LIMIT_MPS`` and "lane" under it (config
     #: ``curve_lift_min_limit_mps``); "carriageway" the same ray cast with the borders at the
     #: edges of the lane's whole edge (junction lanes keep their half width).

@@ -74,14 +74,15 @@ class Selection:
         curves = options.corridor in ("arc", "road", "auto")
         lifted = options.corridor in ("road", "auto")
         if "curve_lateral_accel" not in options.fixed_keys:
-            # The arc and road corridors keep to the scenario's comfort bound;
-            # the others are the paper's ray cast (curve_lateral_accel 0).
+            # The arc and road corridors keep to the scenario's comfort bound,
+            # auto to a fraction of it; the others are the paper's ray cast
+            # (curve_lateral_accel 0).
             a_y = conn.scenario.comfort_lateral_accel_mps2 if curves else 0.0
             if options.corridor == "auto":
                 a_y *= AUTO_LIFT_COMFORT_FRACTION
             self.base_config = self.base_config.replace(curve_lateral_accel=a_y)
         if "curve_with_ray" not in options.fixed_keys:
-            # road: the faster of the ray cast and the curve speeds.
+            # road and auto: the faster of the ray cast and the curve speeds.
             self.base_config = self.base_config.replace(curve_with_ray=lifted)
         if lifted and "curve_smoothing_m" not in options.fixed_keys:
             self.base_config = self.base_config.replace(curve_smoothing_m=CURVE_SMOOTHING_M)
