@@ -508,6 +508,65 @@ def test_wait_for_gap_lines_up_behind_the_tighter_neighbour() -> None:
     assert lcs._merge_leads == {}
 
 
+def test_wait_for_gap_falls_back_behind_one_moving_alongside_on_the_last_lane() -> None:
+    """A change over several lanes waits: a vehicle on its last lane whose
+    body overlaps the changer's along the road, moving, is a leader at gap
+    0 (``getNeighbors`` sees only the lane beside); one standing, one
+    wholly behind or wholly ahead is not."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", lane="e_2", pos=100.0, speed=20.0)  # body from 95 to 100
+    v.add("level", lane="e_0", pos=98.0, speed=20.0)
+    v.add("standing", lane="e_0", pos=99.0, speed=0.0)
+    v.add("behind", lane="e_0", pos=95.0, speed=20.0)  # its front at the changer's back
+    v.add("ahead", lane="e_0", pos=105.0 + EPS, speed=20.0)  # its back just past the changer's front
+    conn.lanes = {"e_0": ["behind", "level", "standing", "ahead"]}
+    lcs = lane_changes(conn)
+    lcs.wait_for_gap("me", -1, "e_0", 100.0, 20.0)
+    assert lcs._merge_leads == {}, "not a change over several lanes: the last lane is not looked at"
+    lcs.wait_for_gap("me", -1, "e_0", 100.0, 20.0, last_lane="e_0")
+    assert lcs._merge_leads == {"me": ("level", 0.0)}
+    lcs._merge_leads = {}
+    v.cars["level"]["speed"] = 0.9
+    lcs.wait_for_gap("me", -1, "e_0", 100.0, 20.0, last_lane="e_0")
+    assert lcs._merge_leads == {}, "under ALONGSIDE_MOVING_MPS"
+    assert lcs.alongside_on_lane("me", "e_0", 100.0) == []
+    v.cars["ahead"]["pos"] = 105.0 - EPS
+    assert lcs.alongside_on_lane("me", "e_0", 100.0) == ["ahead"]
+
+
+@pytest.mark.parametrize("direction", [1, -1])
+def test_a_leader_is_left_behind_once_the_change_clears_it_before_its_min_gap(direction: int) -> None:
+    """``left_behind``: the change's smoothstep must have the vehicle clear
+    of a standing leader (half the two widths plus ``LANE_CHANGE_CLEAR_M``
+    sideways) when its front comes within minGap of the leader's back,
+    where SUMO counts a collision; judged at the leader's back, a car on
+    highway_onramp "collided" 1.6 m across. Lanes 5 m wide (5 m between
+    centres), cars 2 m wide: clear needs 2.5 m, smoothstep 0.5, reached
+    10 m into the 20 m change, whose front axle starts 2 m behind the
+    front at 95 m: the front at 100 m + gap 7 m."""
+    conn = FakeConn()
+    v = conn.vehicle
+    target = 1 if direction > 0 else 0
+    own = "e_0" if direction > 0 else "e_1"
+    v.add("me", lane=own, pos=100.0, speed=2.0, lat=direction * 1.0)  # 1 m across: committed
+    v.add("lead", lane=own, speed=0.0)
+    lcs = lane_changes(conn, lanes={"e_0": FakeLane(200.0, 5.0), "e_1": FakeLane(200.0, 5.0)})
+    act = SimpleNamespace(vid="me", change_span=(95.0, 20.0), changing=(direction, target), tactical=False)
+    assert lcs.left_behind(act, ("lead", 7.0 + 1e-6)) is True  # type: ignore[arg-type]
+    assert lcs.left_behind(act, ("lead", 7.0 - 1e-6)) is False  # type: ignore[arg-type]
+    # Not committed (under ABORT_CHANGE_LAT_M across) and, at 6 m/s, too
+    # close to stop at the planning deceleration (4 m/s^2: 4.5 m + 5 m): it counts.
+    v.cars["me"]["lat"] = direction * 0.3
+    v.cars["me"]["speed"] = 6.0
+    assert lcs.left_behind(act, ("lead", 7.0 + 1e-6)) is False  # type: ignore[arg-type]
+    # The leader's back beyond the lane's end: it counts.
+    v.cars["me"]["lat"] = direction * 1.0
+    v.cars["me"]["pos"] = 200.0 - 7.5
+    act.change_span = (187.5, 20.0)
+    assert lcs.left_behind(act, ("lead", 7.0 + 1e-6)) is False  # type: ignore[arg-type]
+
+
 def test_a_lane_change_starts_where_sumo_has_the_front_when_it_is_a_little_ahead() -> None:
     """``sumo_ahead``: SUMO's front on the same lane up to 5 m ahead of
     blendtrack's is where the change starts; behind it, further ahead (a

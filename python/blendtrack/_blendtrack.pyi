@@ -36,6 +36,7 @@ __all__ = [
     "polyline_blend",
     "polyline_join",
     "polyline_distance",
+    "smoothstep",
 ]
 
 __version__: str
@@ -385,3 +386,5 @@ def polyline_join(
     kappa_max: float = 0.0,
 ) -> dict[str, Any]: ...
 def polyline_distance(p: npt.NDArray[np.float64], q: npt.NDArray[np.float64]) -> float: ...
+def smoothstep(u: float) -> float:
+    """The lateral profile of a lane change's blend (``polyline_blend``): 3u^2 - 2u^3 of ``u`` clamped to [0, 1]."""

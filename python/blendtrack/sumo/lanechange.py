@@ -10,7 +10,7 @@ from collections.abc import Callable
 from typing import Any
 
 import blendtrack
-from blendtrack._blendtrack import ADVANCE_MAX_M
+from blendtrack._blendtrack import ADVANCE_MAX_M, smoothstep
 from blendtrack.sumo.connection import SumoConnection
 from blendtrack.sumo.geometry import RouteGeometry
 from blendtrack.sumo.network import Network
@@ -47,8 +47,9 @@ LANE_CHANGE_MAX_M = 60.0
 ABORT_CHANGE_LAT_M = 0.5
 # During a change the leader on the lane left behind stops counting once the
 # change will have the vehicle this far (m) beside it, sideways, when its front
-# reaches it (``LaneChanges.left_behind``), the front axle taken this far (m)
-# behind the front bumper.
+# comes within minGap of its back, where SUMO counts a collision
+# (``LaneChanges.left_behind``), the front axle taken this far (m) behind
+# the front bumper.
 LANE_CHANGE_CLEAR_M = 0.5
 CHANGE_AXLE_BEHIND_M = 2.0
 # Courtesy to a vehicle waiting to change lanes onto a controlled vehicle's
@@ -167,7 +168,8 @@ class LaneChanges:
         """During a lane change: is ``lead``, the leader on the lane the
         vehicle leaves (SUMO's ``(id, gap)``), one it leaves behind? It is
         when the change's smoothstep has the vehicle clear of it (lateral
-        room ``LANE_CHANGE_CLEAR_M``) by the time the front reaches its back,
+        room ``LANE_CHANGE_CLEAR_M``) by the time the front comes within
+        minGap of its back,
         with the leader standing (the worst case), and the vehicle either is
         past giving the change up (a change the route needs, over
         ``ABORT_CHANGE_LAT_M`` from its lane's centre) or could still stop
@@ -197,13 +199,16 @@ class LaneChanges:
             # without the target lane's index: sumolib raises IndexError,
             # which ended a run at Eccles): the leader counts.
             return False
-        # Where the front axle is when the front bumper reaches the leader's
-        # back (SUMO's gap leaves out minGap): the offset the change has there.
-        back = float(v.getLanePosition(vid)) + gap + float(v.getMinGap(vid))
-        if back > float(lane.getLength()):
+        # Where the front axle is when the front bumper comes within minGap
+        # of the leader's back (SUMO's gap 0): SUMO counts a collision there
+        # (``collision.mingap-factor``, 1 by default), not at the bumpers
+        # (traced: highway_onramp, every vehicle controlled, seed 1, 207.5 s:
+        # a car changing at 4 m/s, 1.6 m across, "collided" at gap -0.09 m
+        # with a standing one this rule had left behind, judged at its back).
+        back = float(v.getLanePosition(vid)) + gap
+        if back + float(v.getMinGap(vid)) > float(lane.getLength()):
             return False  # beyond this lane: where lanes merge it may be ahead on the target lane too
-        u = min(max((back - CHANGE_AXLE_BEHIND_M - start) / max(length, 1e-6), 0.0), 1.0)
-        offset = spacing * u * u * (3.0 - 2.0 * u)
+        offset = spacing * smoothstep((back - CHANGE_AXLE_BEHIND_M - start) / max(length, 1e-6))
         return offset >= 0.5 * (float(v.getWidth(vid)) + float(v.getWidth(lid))) + LANE_CHANGE_CLEAR_M
 
     def changing_leader(self, act: Active, lead: Any) -> Any:
@@ -487,8 +492,9 @@ class LaneChanges:
         # on (Eccles 30 %, seeds 0-11: asked for every waiting change,
         # arrivals fell from 0.628 to 0.594 of plain's; asked only here, 0.621).
         urgent = not geo.pending_early
+        last_lane = target_lane if abs(target - current) > 1 else None
         if not could_change_lane(self.conn.lane_change_state, act.vid, direction):
-            self.wait_for_gap(act.vid, direction, target_lane, pos, speed, urgent)
+            self.wait_for_gap(act.vid, direction, target_lane, pos, speed, urgent, last_lane)
             return
         lane_length = float(self.network.net().getLane(lane_id).getLength())
         # SUMO a little ahead on the lane (a crawl's speed-only moves let it
@@ -510,7 +516,7 @@ class LaneChanges:
             or not self.room_between(act.vid, edge, current, target, pos, speed, length)
             or self.joining_from_beyond(act.vid, edge, target, direction, pos, length)
         ):
-            self.wait_for_gap(act.vid, direction, target_lane, pos, speed, urgent)
+            self.wait_for_gap(act.vid, direction, target_lane, pos, speed, urgent, last_lane)
             return
         geo2, track = self.tracks.geometry(geo.edges[k_edge:], current, change=(pos, length))
         if ahead > 0.0:
@@ -535,14 +541,18 @@ class LaneChanges:
             return 0.0
         return ahead if 0.0 < ahead <= ADVANCE_MAX_M else 0.0
 
-    def wait_for_gap(self, vid: str, direction: int, target_lane: str, pos: float, speed: float, urgent: bool = True) -> None:
+    def wait_for_gap(
+        self, vid: str, direction: int, target_lane: str, pos: float, speed: float, urgent: bool = True, last_lane: str | None = None
+    ) -> None:
         """``vid`` has a lane change due and no room yet: it keeps behind the
         target lane's nearest vehicle ahead as well as its own leader, so it
         matches the target lane's speed and lines up behind that vehicle, and
         it falls back behind a vehicle alongside (taken as a leader at gap 0:
         the stopping law then keeps it a little slower) rather than drive
         level with it down the lane; the follower there is asked for
-        courtesy."""
+        courtesy. ``last_lane``: the last lane of a change over several
+        lanes, where it falls back behind a moving vehicle alongside too
+        (``alongside_on_lane``)."""
         v = self.conn.sumo.vehicle
         side = 1 if direction < 0 else 0
         near = [(nid, max(gap, 0.0)) for nid, gap in v.getNeighbors(vid, 2 | side)]
@@ -551,12 +561,30 @@ class LaneChanges:
         # to change onto the other's lane stood level for good (Eccles:
         # 300 s, the queue behind both with them).
         near += [(nid, 0.0) for nid, gap in v.getNeighbors(vid, side) if gap < 0.0 and float(v.getSpeed(nid)) >= ALONGSIDE_MOVING_MPS]
+        if last_lane is not None:
+            near += [(nid, 0.0) for nid in self.alongside_on_lane(vid, last_lane, pos)]
         lead = None
         for cand in near:
             lead = self.tighter_leader(lead, cand)
         if lead is not None:
             self._merge_leads[vid] = lead
         self.ask_courtesy(vid, target_lane, pos, speed, urgent)
+
+    def alongside_on_lane(self, vid: str, lane: str, front: float) -> list[str]:
+        """The vehicles on ``lane`` (of ``vid``'s edge: lane positions are
+        shared) whose bodies overlap ``vid``'s along the road, ``vid``'s
+        front at ``front``, moving at ``ALONGSIDE_MOVING_MPS`` or more: on
+        the last lane of a change over several, ``getNeighbors`` sees only
+        the lane beside. Traced (``tests/test_merges.py``, early exit): a
+        car on lane 2 needing lane 0 drove level with one there the whole
+        edge, whose lane never had room for it, and stood 61 s at the end."""
+        back = front - float(self.conn.sumo.vehicle.getLength(vid))
+        out = []
+        for other in self.conn.vehicles_on(lane):
+            at = float(self.conn.get_lane_pos(other))
+            if at > back and at - float(self.conn.sumo.vehicle.getLength(other)) < front and float(self.conn.get_speed(other)) >= ALONGSIDE_MOVING_MPS:
+                out.append(other)
+        return out
 
     def ask_courtesy(self, vid: str, target_lane: str, pos: float, speed: float, urgent: bool = True) -> None:
         """``vid`` waits to change onto ``target_lane`` with its front at

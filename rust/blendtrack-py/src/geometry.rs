@@ -198,6 +198,13 @@ pub fn polyline_distance(
         .map_err(geometry_error)
 }
 
+/// The lateral profile of a lane change's blend (`polyline_blend`):
+/// `3u^2 - 2u^3` of `u` clamped to [0, 1]; NaN stays NaN.
+#[pyfunction]
+pub fn smoothstep(u: f64) -> f64 {
+    polyline::smoothstep(u)
+}
+
 /// Adds the geometry functions to the native module.
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(polyline_arc_lengths, m)?)?;
@@ -206,5 +213,6 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(polyline_blend, m)?)?;
     m.add_function(wrap_pyfunction!(polyline_join, m)?)?;
     m.add_function(wrap_pyfunction!(polyline_distance, m)?)?;
+    m.add_function(wrap_pyfunction!(smoothstep, m)?)?;
     Ok(())
 }
