@@ -36,7 +36,8 @@ SCOPE = {
     "python/blendtrack/sumo/junctions.py": ["refresh_tls", "must_yield", "junction_blocked", "internal_junction_busy"],
     "python/blendtrack/sumo/lanechange.py": [
         "tighter_leader", "target_lane_clear", "tactical_room", "far_lane_room", "ask_courtesy", "wait_for_gap",
-        "soft_leaders", "has_soft_leaders", "tactical_gap", "change_length", "could_change_lane",
+        "soft_leaders", "has_soft_leaders", "tactical_gap", "change_length", "could_change_lane", "alongside_on_lane",
+        "left_behind",
     ],
 }
 # Tests per mutant: the stand-in-for-SUMO tests of these decisions (seconds).

@@ -122,7 +122,7 @@ _OWN: tuple[Param, ...] = (
     Param("controlled_type", str, ("sumo", "compare"), "control every vehicle of this vType"),
     Param("max_controlled", int, ("sumo",), "control at most this many vehicles", 0.0),
     Param("border_margin_m", float, ("sumo", "compare"), "added to each side of a lane's half width for the virtual borders (m)", 0.0),
-    Param("corridor", str, ("sumo", "compare"), "what limits curve speeds: lane (the paper's, default), arc, road, auto (road from 60 km/h, lane under it) or carriageway", choices=("lane", "arc", "road", "auto", "carriageway")),
+    Param("corridor", str, ("sumo", "compare"), "what limits curve speeds: lane (the paper's), arc, road, auto (default: road from 60 km/h, lane under it) or carriageway", choices=("lane", "arc", "road", "auto", "carriageway")),
     Param("stop_at_route_end", bool, ("sumo", "compare"), "controlled vehicles stop at their route's end (default: leave at speed)"),
     Param("tactical_lane_changes", bool, ("sumo", "compare"), "controlled vehicles also change lanes their route does not need (default: no)"),
     Param("open_gaps", bool, ("sumo", "compare"), "SUMO's drivers are asked to open a gap for a controlled vehicle waiting to change lanes (default: yes)"),

@@ -182,11 +182,11 @@ def _add_driving_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--corridor",
         choices=("lane", "arc", "road", "auto", "carriageway"),
-        default="lane",
-        help="what limits the speed in curves: lane (default) the paper's virtual borders at the lane's half width and its "
+        default="auto",
+        help="what limits the speed in curves: lane the paper's virtual borders at the lane's half width and its "
         "ray cast; arc the curve speeds sqrt(a_y / |curvature|) previewed along "
         "the path, a_y = curve_lateral_accel of --config or the scenario's comfort bound (2 m/s^2 unless its scenario.toml "
-        "says otherwise); road the faster of the two (lane's ray cast and arc's curve speeds); auto road where the lane's speed limit is 60 km/h or more (its curve speeds at half the comfort bound), lane under it; carriageway the paper's ray cast with the borders at the edges of the whole road (docs/sumo.md)",
+        "says otherwise); road the faster of the two (lane's ray cast and arc's curve speeds); auto (default) road where the lane's speed limit is 60 km/h or more (its curve speeds at half the comfort bound), lane under it; carriageway the paper's ray cast with the borders at the edges of the whole road (docs/sumo.md)",
     )
     parser.add_argument(
         "--stop-at-route-end",

@@ -78,15 +78,15 @@ class RunOptions:
     border_margin_m: float = 0.0
     #: What limits the speed in curves (docs/sumo.md, "Curves"): "arc" the curve speeds sqrt(a_y / |kappa|) previewed along the
     #: path, a_y = the config's ``curve_lateral_accel`` when set, else the
-    #: scenario's comfort bound on lateral acceleration; "lane" (the default) the paper's
+    #: scenario's comfort bound on lateral acceleration; "lane" the paper's
     #: virtual borders at the lane's half width (plus ``border_margin_m``) and
     #: its ray cast; "road" the faster of "lane" and "arc" (config
     #: ``curve_with_ray``); "auto" "road" (its curve speeds at
     #: ``AUTO_LIFT_COMFORT_FRACTION`` of the comfort bound) where the lane's speed
     #: limit is at least ``AUTO_LIFT_MIN_LIMIT_MPS`` and "lane" under it (config
-    #: ``curve_lift_min_limit_mps``); "carriageway" the same ray cast with the borders at the
+    #: ``curve_lift_min_limit_mps``; the default); "carriageway" the same ray cast with the borders at the
     #: edges of the lane's whole edge (junction lanes keep their half width).
-    corridor: str = "lane"
+    corridor: str = "auto"
     #: Stop at the end of the route (a standing obstacle there). By default
     #: controlled vehicles, like SUMO's drivers (``arrivalSpeed="current"``),
     #: leave the network at their route's end without slowing down.
