@@ -138,6 +138,7 @@ def _run_options(task: dict[str, Any]) -> Any:
         stop_at_route_end=p.get("stop_at_route_end", False),
         tactical_lane_changes=p.get("tactical_lane_changes", False),
         open_gaps=p.get("open_gaps", True),
+        miss_exit_after_s=p.get("miss_exit_after_s", sumo.RunOptions.miss_exit_after_s),
         control_dt_s=p.get("control_dt_s", 0.05),
         config=config,
         vehicle=vehicle,

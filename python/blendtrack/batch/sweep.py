@@ -126,6 +126,7 @@ _OWN: tuple[Param, ...] = (
     Param("stop_at_route_end", bool, ("sumo", "compare"), "controlled vehicles stop at their route's end (default: leave at speed)"),
     Param("tactical_lane_changes", bool, ("sumo", "compare"), "controlled vehicles also change lanes their route does not need (default: no)"),
     Param("open_gaps", bool, ("sumo", "compare"), "SUMO's drivers are asked to open a gap for a controlled vehicle waiting to change lanes (default: yes)"),
+    Param("miss_exit_after_s", float, ("sumo", "compare"), "a controlled vehicle standing this long (s) at its lane's end waiting for a change its route needs drives on, rerouted (0: it waits)", 0.0),
     Param("control_dt_s", float, ("sumo", "compare"), "control rate: control steps per SUMO step = ceil(step / control_dt_s) (s; default 0.05)", 0.0, None, True),
     Param("baseline", str, ("compare",), "car-following model of the baseline", choices=BASELINES),
 )

@@ -12,6 +12,10 @@ from typing import Any
 import blendtrack
 from blendtrack.cli.common import Parser, alpha_value, finite, raise_interrupt, require_file, seed, seeds, sumo_args
 
+#: ``RunOptions.miss_exit_after_s``'s default, listed here so that parsing
+#: does not load the SUMO bridge (a test holds the two equal).
+MISS_EXIT_AFTER_S = 20.0
+
 
 def _sumo_config(
     file: str | None,
@@ -43,6 +47,7 @@ def _run_options(args: argparse.Namespace, **extra: Any) -> Any:
         stop_at_route_end=args.stop_at_route_end,
         tactical_lane_changes=args.tactical_lane_changes,
         open_gaps=args.open_gaps,
+        miss_exit_after_s=args.miss_exit_after,
         control_dt_s=args.control_dt,
         sumo_args=args.sumo_args,
         **extra,
@@ -206,6 +211,15 @@ def _add_driving_options(parser: argparse.ArgumentParser) -> None:
         action="store_false",
         help="never ask a SUMO driver to open a gap for a controlled vehicle waiting to change lanes (default: the driver "
         "behind on the target lane is asked through TraCI openGap, braking at most 2 m/s^2, as SUMO's drivers do for each other)",
+    )
+    parser.add_argument(
+        "--miss-exit-after",
+        type=finite("miss exit after", 0.0),
+        default=MISS_EXIT_AFTER_S,
+        metavar="S",
+        help="a controlled vehicle that has stood S seconds at the end of its lane waiting for a lane change its route needs "
+        "there gives the exit up, drives on along its lane and is rerouted to its destination (out of the network when no "
+        f"way leads back; missed_exits in summary.json and vehicles.csv); 0: it waits, as SUMO's drivers do (default {MISS_EXIT_AFTER_S:g})",
     )
 
 

@@ -95,6 +95,17 @@ TACTICAL_DECEL_MPS2 = 1.0
 # room falls below the same gaps at half the headway and twice the braking
 # (the margin keeps a change from being given up for a small speed change).
 TACTICAL_KEEP_FACTOR = 0.5
+# A vehicle whose route needs a lane change where its lane ends for the route
+# and that has stood (under MISS_EXIT_SPEED_MPS) within MISS_EXIT_NEAR_END_M
+# of that end for ``RunOptions.miss_exit_after_s`` seconds drives on along
+# its lane and is rerouted from there to its destination
+# (``LaneChanges.miss_exit``; "lost vehicles" in other traffic simulators):
+# a change over several lanes of a busy motorway from a standstill needs a
+# gap on every lane at once, and at Eccles one such car stood at the end of
+# the weaving edge's lane 0 from 249 s to the end of the run with the
+# through traffic queued behind it.
+MISS_EXIT_SPEED_MPS = 0.5
+MISS_EXIT_NEAR_END_M = 2.0 * LANE_CHANGE_ROOM_M
 # No such change within this many metres past where SUMO has inserted a
 # vehicle on an edge: SUMO inserts on a lane without seeing a vehicle that is
 # changing onto it (traced: a vehicle inserted at 28 m/s behind one that
@@ -106,7 +117,7 @@ class LaneChanges:
     """The lane changes under way and due, and this step's soft leaders."""
 
     def __init__(self, conn: SumoConnection, network: Network, tracks: Tracks, active: dict[str, Active], plan_decel: float,
-                 plan_accel: float = 1.0, open_gaps: bool = True) -> None:
+                 plan_accel: float = 1.0, open_gaps: bool = True, miss_exit_after_s: float = 0.0) -> None:
         self.conn = conn
         self.network = network
         self.tracks = tracks
@@ -120,6 +131,10 @@ class LaneChanges:
         self.open_gaps_on = open_gaps
         #: The vehicles changing lanes.
         self.changing: dict[str, Active] = {}
+        #: ``RunOptions.miss_exit_after_s`` (0: never), and how long (s)
+        #: each vehicle has stood at the end of its lane waiting to change.
+        self.miss_exit_after_s = miss_exit_after_s
+        self._stood: dict[str, float] = {}
         #: Vehicles where a lane change is due: (vid, lane, lane position, speed).
         self.due: list[tuple[str, int, float, float]] = []
         #: This step's courtesy leaders: follower id -> (lane changer id, gap m).
@@ -140,7 +155,8 @@ class LaneChanges:
         #: Edge -> the furthest position SUMO has inserted a vehicle at.
         self._insertions: dict[str, float] = {}
         self.counts = {"lane_changes_aborted": 0, "courtesy_steps": 0, "merge_lead_steps": 0, "tactical_lane_changes": 0,
-                       "gaps_opened": 0, "cut_in_steps": 0, "far_side_holds": 0, "blind_caps": 0}
+                       "gaps_opened": 0, "cut_in_steps": 0, "far_side_holds": 0, "blind_caps": 0,
+                       "missed_exits": 0}
 
     def set_changing(self, act: Active, changing: tuple[int, int] | None) -> None:
         act.changing = changing
@@ -154,6 +170,7 @@ class LaneChanges:
     def drop(self, vid: str) -> None:
         """``vid`` is no longer controlled."""
         self.changing.pop(vid, None)
+        self._stood.pop(vid, None)
 
     # ------------------------------------------------------------- under way
     def changing_leaders(self, leaders: list[Any], pos: dict[int, int] | None, index: dict[str, int]) -> None:
@@ -493,10 +510,12 @@ class LaneChanges:
         # arrivals fell from 0.628 to 0.594 of plain's; asked only here, 0.621).
         urgent = not geo.pending_early
         last_lane = target_lane if abs(target - current) > 1 else None
+        lane_length = float(self.network.net().getLane(lane_id).getLength())
+        if urgent and self.stood_too_long(act.vid, lane_length - pos, speed) and self.miss_exit(act, lane_id):
+            return
         if not could_change_lane(self.conn.lane_change_state, act.vid, direction):
             self.wait_for_gap(act.vid, direction, target_lane, pos, speed, urgent, last_lane)
             return
-        lane_length = float(self.network.net().getLane(lane_id).getLength())
         # SUMO a little ahead on the lane (a crawl's speed-only moves let it
         # run on): the change starts where SUMO has the front, and the
         # state is moved on to it first, never back onto the vehicle behind.
@@ -518,10 +537,71 @@ class LaneChanges:
         ):
             self.wait_for_gap(act.vid, direction, target_lane, pos, speed, urgent, last_lane)
             return
+        self._stood.pop(act.vid, None)
         geo2, track = self.tracks.geometry(geo.edges[k_edge:], current, change=(pos, length))
         if ahead > 0.0:
             self.tracks.fleet.advance_state(act.slot, ahead)
         self.begin_change(act, geo2, track, act.route_base + k_edge, direction, target, (pos, length))
+
+    def stood_too_long(self, vid: str, to_end: float, speed: float) -> bool:
+        """One more step of ``vid`` waiting for its change ``to_end`` m
+        before its lane ends for its route: True once it has stood
+        (``MISS_EXIT_SPEED_MPS``) within ``MISS_EXIT_NEAR_END_M`` of the
+        end for ``miss_exit_after_s`` (never when that is 0). Moving, or
+        further back, starts the count again."""
+        if self.miss_exit_after_s <= 0.0 or speed >= MISS_EXIT_SPEED_MPS or to_end > MISS_EXIT_NEAR_END_M:
+            self._stood.pop(vid, None)
+            return False
+        stood = self._stood.get(vid, 0.0) + self.conn.dt
+        self._stood[vid] = stood
+        return stood >= self.miss_exit_after_s
+
+    def miss_exit(self, act: Active, lane_id: str) -> bool:
+        """``act`` gives up the change it waits for and drives on along
+        ``lane_id``: its route becomes this edge, then the fastest route
+        SUMO's router finds from an edge the lane leads to, to its
+        destination, or where none does, ``out_of_network``. True when
+        rerouted; False (it waits on) when the lane leads nowhere, the
+        vehicle has a stop ahead (a bus must serve its stops), or SUMO
+        refuses the route."""
+        v, sim = self.conn.sumo.vehicle, self.conn.sumo.simulation
+        edge = lane_id.rpartition("_")[0]
+        try:
+            if v.getStops(act.vid, 1):
+                return False
+            route = tuple(v.getRoute(act.vid))
+            vtype = v.getTypeID(act.vid)
+            lane = self.network.net().getLane(lane_id)
+        except (self.conn.errors, KeyError, IndexError):
+            return False
+        best = None
+        vclass = v.getVehicleClass(act.vid)
+        for out in lane.getOutgoing():
+            nxt = out.getTo().getID()
+            try:
+                stage = sim.findRoute(nxt, route[-1], vtype)
+            except self.conn.errors:
+                continue
+            if stage.edges and (best is None or stage.travelTime < best.travelTime):
+                best = stage
+        if best is not None:
+            rest = list(best.edges)
+        else:
+            # No way back to the destination from here (a motorway's
+            # exit): out of the network along the widest road.
+            outgoing = [o.getTo() for o in lane.getOutgoing() if o.getTo().allows(vclass)]
+            if not outgoing:
+                return False
+            rest = out_of_network(max(outgoing, key=lambda e: e.getLaneNumber()), vclass)
+        try:
+            v.setRoute(act.vid, [edge, *rest])
+        except self.conn.errors:
+            return False
+        self.tracks.rebuild(act, v)
+        self._stood.pop(act.vid, None)
+        self.counts["missed_exits"] += 1
+        act.record.missed_exits += 1
+        return True
 
     def sumo_ahead(self, vid: str, lane_id: str, pos: float) -> float:
         """How far (m) SUMO has ``vid``'s front ahead of lane position
@@ -918,6 +998,19 @@ class LaneChanges:
                 if gap < tactical_gap(speed, o_speed, TACTICAL_KEEP_FACTOR):
                     return False
         return True
+
+
+def out_of_network(first: Any, vclass: str, limit: int = 200) -> list[str]:
+    """Edge ids from sumolib edge ``first`` on, each the widest next edge
+    ``vclass`` may use, never one twice, until an edge leads nowhere (the
+    network's edge) or ``limit`` edges."""
+    edges, seen, e = [], set(), first
+    while e is not None and e.getID() not in seen and len(edges) < limit:
+        edges.append(e.getID())
+        seen.add(e.getID())
+        nxt = [x for x in e.getOutgoing() if x.allows(vclass) and x.getID() not in seen]
+        e = max(nxt, key=lambda x: x.getLaneNumber()) if nxt else None
+    return edges
 
 
 def tactical_gap(rear: float, front: float, factor: float) -> float:

@@ -46,6 +46,10 @@ class VehicleRecord:
     reverse_warnings: int = 0
     time_above_comfort_s: float = 0.0
     lane_changes: int = 0
+    #: Lane changes its route needed that it gave up, rerouted from the
+    #: lane's end (``RunOptions.miss_exit_after_s``): it did not reach its
+    #: own destination, whatever SUMO's trip info says of its arrival.
+    missed_exits: int = 0
     #: SUMO stops served, and skipped with their reasons (";"-joined; see blendtrack.sumo.stops).
     stops_served: int = 0
     stops_skipped: int = 0

@@ -143,7 +143,8 @@ class SumoRun:
         self.junctions = Junctions(self.conn, self.network, self.tracks, self.fleet, plan_decel,
                                    float(base_config.preferred_acceleration), controlled=self.active)
         self.lanes = LaneChanges(self.conn, self.network, self.tracks, self.active, plan_decel,
-                                 float(base_config.preferred_acceleration), open_gaps=options.open_gaps)
+                                 float(base_config.preferred_acceleration), open_gaps=options.open_gaps,
+                                 miss_exit_after_s=options.miss_exit_after_s)
         self.stops = Stops(self.conn, self.fleet, self.network, self.tracks.lanes, self.lanes)
         obs_decel = base_config.max_obs_deceleration if "max_obs_deceleration" in options.fixed_keys else base_config.max_deceleration
         self.sumo_leaders = SumoLeaders(self.conn, self.active, max(abs(float(obs_decel)), 0.5))
@@ -290,6 +291,7 @@ class SumoRun:
             "stop_at_route_end": self.opt.stop_at_route_end,
             "tactical_lane_changes_enabled": self.opt.tactical_lane_changes,
             "open_gaps_enabled": self.opt.open_gaps,
+            "miss_exit_after_s": self.opt.miss_exit_after_s,
             "moves_speed_only": self.moves["speed"],
             "moves_none": self.moves["none"],
             "moves_lane_position": self.moves["lane"],
@@ -311,6 +313,7 @@ class SumoRun:
             "gaps_opened": lanes["gaps_opened"],
             "merge_lead_steps": lanes["merge_lead_steps"],
             "tactical_lane_changes": lanes["tactical_lane_changes"],
+            "missed_exits": lanes["missed_exits"],
             **self.stops.counts,
             **self.incidents.summary(),
             "zipper_steps": self.zippers.counts["zipper_steps"],

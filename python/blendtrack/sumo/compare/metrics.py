@@ -34,7 +34,7 @@ NETWORK_METRICS: tuple[tuple[str, str, str], ...] = (
     ("controlled_time_loss_s", "mean time loss, controlled vehicles", "s"),
     ("background_travel_time_s", "mean travel time, background vehicles", "s"),
     ("background_time_loss_s", "mean time loss, background vehicles", "s"),
-    ("throughput", "throughput (arrived vehicles)", "veh"),
+    ("throughput", "throughput (vehicles arrived at their destination)", "veh"),
     ("ssm_conflicts", "SSM conflicts (TTC < 3 s or DRAC > 3 m/s^2)", "count"),
     ("collisions", "collisions", "count"),
     ("teleports", "teleports", "count"),
@@ -70,6 +70,16 @@ def vehicle_metrics(tr: Track, trip: dict[str, float] | None, dt: float, comfort
     }
 
 
+def missed_exits(vehicles_csv: Path) -> set[str]:
+    """The vehicles of a run's ``vehicles.csv`` (none when there is no such
+    file, or a file from before the column) that gave up an exit
+    (``missed_exits`` > 0, ``RunOptions.miss_exit_after_s``)."""
+    if not vehicles_csv.exists():
+        return set()
+    with open(vehicles_csv) as f:
+        return {r["id"] for r in csv.DictReader(f) if float(r.get("missed_exits") or 0) > 0}
+
+
 def load_run(out: Path, is_controlled: Callable[[str, str], bool]) -> RunData:
     sd = out / "sumo"
     fcd = read_fcd(sd / "fcd.xml")
@@ -84,6 +94,7 @@ def load_run(out: Path, is_controlled: Callable[[str, str], bool]) -> RunData:
         vals = [trips[i][key] for i in ids]
         return float(np.mean(vals)) if vals else math.nan
 
+    missed = missed_exits(out / "vehicles.csv")
     ctrl = [v for v in trips if v in controlled]
     back = [v for v in trips if v not in controlled]
     network = {
@@ -91,7 +102,9 @@ def load_run(out: Path, is_controlled: Callable[[str, str], bool]) -> RunData:
         "controlled_time_loss_s": mean_of(ctrl, "time_loss"),
         "background_travel_time_s": mean_of(back, "duration"),
         "background_time_loss_s": mean_of(back, "time_loss"),
-        "throughput": float(sum(t["arrived"] for t in trips.values())),
+        # A controlled vehicle that missed its exit (vehicles.csv) arrives
+        # in SUMO's trip info, but not where its trip was going.
+        "throughput": float(sum(t["arrived"] for v, t in trips.items() if v not in missed)),
         "ssm_conflicts": float(read_ssm_conflicts(sd / "ssm.xml")),
         "collisions": float(collisions),
         "teleports": float(teleports),
