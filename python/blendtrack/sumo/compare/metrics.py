@@ -38,6 +38,7 @@ NETWORK_METRICS: tuple[tuple[str, str, str], ...] = (
     ("ssm_conflicts", "SSM conflicts (TTC < 3 s or DRAC > 3 m/s^2)", "count"),
     ("collisions", "collisions", "count"),
     ("teleports", "teleports", "count"),
+    ("missed_exits", "missed exits (controlled vehicles rerouted from a lane's end)", "veh"),
 )
 
 
@@ -108,6 +109,7 @@ def load_run(out: Path, is_controlled: Callable[[str, str], bool]) -> RunData:
         "ssm_conflicts": float(read_ssm_conflicts(sd / "ssm.xml")),
         "collisions": float(collisions),
         "teleports": float(teleports),
+        "missed_exits": float(len(missed)),
     }
     lat_err: dict[str, float] = {}
     vcsv = out / "vehicles.csv"
