@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import subprocess
 from pathlib import Path
 from types import SimpleNamespace
@@ -139,14 +140,16 @@ def test_out_of_the_network_along_the_widest_road(tmp_path: Path) -> None:
 def test_compare_leaves_vehicles_that_missed_their_exit_out_of_the_throughput(tmp_path: Path) -> None:
     """``compare``'s throughput counts vehicles arrived at their own
     destination: one that missed its exit is read off ``vehicles.csv``."""
-    from blendtrack.sumo.compare.metrics import missed_exits
+    from blendtrack.sumo.compare.metrics import read_vehicles
 
-    assert missed_exits(tmp_path / "none.csv") == set()
+    assert read_vehicles(tmp_path / "none.csv") == ({}, set())
     f = tmp_path / "vehicles.csv"
-    f.write_text("id,missed_exits\na,0\nb,1\nc,2\nd,\n")
-    assert missed_exits(f) == {"b", "c"}
-    f.write_text("id,lane_changes\na,1\n")  # a file from before the column
-    assert missed_exits(f) == set()
+    f.write_text("id,lateral_error_rms_m,missed_exits\na,0.1,0\nb,0.2,1\nc,,2\nd,0.3,\n")
+    lat_err, missed = read_vehicles(f)
+    assert missed == {"b", "c"}
+    assert lat_err["a"] == 0.1 and lat_err["d"] == 0.3 and math.isnan(lat_err["c"])
+    f.write_text("id,lateral_error_rms_m,lane_changes\na,0.1,1\n")  # a file from before the column
+    assert read_vehicles(f) == ({"a": 0.1}, set())
 
 
 def test_the_cli_and_the_sweeps_default_to_the_runs_own_wait() -> None:

@@ -71,14 +71,20 @@ def vehicle_metrics(tr: Track, trip: dict[str, float] | None, dt: float, comfort
     }
 
 
-def missed_exits(vehicles_csv: Path) -> set[str]:
-    """The vehicles of a run's ``vehicles.csv`` (none when there is no such
-    file, or a file from before the column) that gave up an exit
-    (``missed_exits`` > 0, ``RunOptions.miss_exit_after_s``)."""
-    if not vehicles_csv.exists():
-        return set()
-    with open(vehicles_csv) as f:
-        return {r["id"] for r in csv.DictReader(f) if float(r.get("missed_exits") or 0) > 0}
+def read_vehicles(vehicles_csv: Path) -> tuple[dict[str, float], set[str]]:
+    """From a run's ``vehicles.csv`` (nothing when there is no such file):
+    each vehicle's RMS lateral error (NaN where empty), and the vehicles
+    that gave up an exit (``missed_exits`` > 0, none in a file from before
+    that column; ``RunOptions.miss_exit_after_s``)."""
+    lat_err: dict[str, float] = {}
+    missed: set[str] = set()
+    if vehicles_csv.exists():
+        with open(vehicles_csv) as f:
+            for row in csv.DictReader(f):
+                lat_err[row["id"]] = float(row["lateral_error_rms_m"]) if row["lateral_error_rms_m"] else math.nan
+                if float(row.get("missed_exits") or 0) > 0:
+                    missed.add(row["id"])
+    return lat_err, missed
 
 
 def load_run(out: Path, is_controlled: Callable[[str, str], bool]) -> RunData:
@@ -95,7 +101,7 @@ def load_run(out: Path, is_controlled: Callable[[str, str], bool]) -> RunData:
         vals = [trips[i][key] for i in ids]
         return float(np.mean(vals)) if vals else math.nan
 
-    missed = missed_exits(out / "vehicles.csv")
+    lat_err, missed = read_vehicles(out / "vehicles.csv")
     ctrl = [v for v in trips if v in controlled]
     back = [v for v in trips if v not in controlled]
     network = {
@@ -111,12 +117,6 @@ def load_run(out: Path, is_controlled: Callable[[str, str], bool]) -> RunData:
         "teleports": float(teleports),
         "missed_exits": float(len(missed)),
     }
-    lat_err: dict[str, float] = {}
-    vcsv = out / "vehicles.csv"
-    if vcsv.exists():
-        with open(vcsv) as f:
-            for row in csv.DictReader(f):
-                lat_err[row["id"]] = float(row["lateral_error_rms_m"]) if row["lateral_error_rms_m"] else math.nan
     return RunData(fcd, trips, controlled, network, lat_err)
 
 
