@@ -129,6 +129,21 @@ def test_the_wait_counts_standing_near_the_end_only_and_starts_again_otherwise()
     assert not any(never.stood_too_long("v", 0.0, 0.0) for _ in range(100))
 
 
+def test_the_wait_starts_again_for_a_vehicle_with_no_change_due() -> None:
+    """A wait counted at one lane's end does not carry over to the next
+    change that comes due (a rebuilt track, say): ``make_due`` keeps the
+    counts of the vehicles whose change is due this step only."""
+    conn = SimpleNamespace(dt=1.0, sumo=SimpleNamespace(vehicle=None))
+    tracks = SimpleNamespace(lanes=SimpleNamespace(name=str))
+    lcs = LaneChanges(conn, None, tracks, {}, 4.0, miss_exit_after_s=3.0)  # type: ignore[arg-type]
+    lcs.stood_too_long("due", 0.0, 0.0)
+    lcs.stood_too_long("gone", 0.0, 0.0)
+    lcs.due = [("due", 0, 0.0, 0.0)]  # not controlled here: nothing is tried
+    lcs.make_due()
+    assert lcs._stood == {"due": 1.0}
+    assert [lcs.stood_too_long("gone", 0.0, 0.0) for _ in range(3)] == [False, False, True]
+
+
 def test_out_of_the_network_along_the_widest_road(tmp_path: Path) -> None:
     net = sumolib.net.readNet(str(_scenario(tmp_path).with_name("n.net.xml")))
     # From "in" the road (2 lanes) is wider than the ramp (1); "out" leads nowhere.

@@ -453,12 +453,17 @@ class LaneChanges:
 
     # ---------------------------------------------------- the route's changes
     def make_due(self) -> None:
-        """The changes found due last step (``due``), made where there is room."""
+        """The changes found due last step (``due``), made where there is room.
+        A vehicle with no change due this step starts its wait for a missed
+        exit (``stood_too_long``) again."""
         name = self.tracks.lanes.name
         for vid, lane, pos, speed in self.due:
             act = self.active.get(vid)
             if act is not None:
                 self.try_lane_change(act, name(lane), pos, speed)
+        if self._stood:
+            due = {d[0] for d in self.due}
+            self._stood = {vid: s for vid, s in self._stood.items() if vid in due}
         self.due = []
         self.open_gaps()
         self.release_caps()
