@@ -88,18 +88,22 @@ def selector(opts: CompareOptions, scenario: Scenario, seed: int) -> Callable[[s
     return lambda vid, vtype: vtype in marked
 
 
-def _output_args(sd: Path) -> list[str]:
-    """SUMO outputs written by both runs (the runner's plus unfinished trips and statistics)."""
+def output_args(sd: Path) -> list[str]:
+    """SUMO outputs written by both runs (the runner's plus unfinished trips
+    and statistics); also what a treatment run made outside ``compare``
+    passes with ``blendtrack sumo run --sumo-args`` to have them."""
     return ["--tripinfo-output.write-unfinished", "true", "--statistic-output", str(sd / "statistics.xml")]
 
 
-def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path, sumo_args: Sequence[str] = ()) -> None:
+def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path, sumo_args: Sequence[str] = (),
+                 devices: bool = True) -> None:
     """Plain SUMO with the options the runner uses (SumoConnection.command
-    with fcd and ssm), the scenario's run configuration (its outputs under
-    ``out/sumo``) and the user's extra SUMO options, which replace ours."""
+    with fcd and ssm, unless ``devices`` is False), the scenario's run
+    configuration (its outputs under ``out/sumo``) and the user's extra SUMO
+    options, which replace ours."""
     sd = out / "sumo"
     sd.mkdir(parents=True, exist_ok=True)
-    cmd = baseline_command(scenario, seed, end_s, sd, sumo_args)
+    cmd = baseline_command(scenario, seed, end_s, sd, sumo_args, devices)
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         lines = [ln.strip() for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
@@ -107,10 +111,13 @@ def run_baseline(scenario: Scenario, seed: int, end_s: float | None, out: Path, 
         raise ScenarioError(f"{scenario.sumocfg}: SUMO refused to start: {errors[0]}")
 
 
-def baseline_command(scenario: Scenario, seed: int, end_s: float | None, sd: Path, sumo_args: Sequence[str] = ()) -> list[str]:
+def baseline_command(scenario: Scenario, seed: int, end_s: float | None, sd: Path, sumo_args: Sequence[str] = (),
+                     devices: bool = True) -> list[str]:
     """The baseline's ``sumo`` command line, its outputs under ``sd``: the
-    runner's (``connection.sumo_command``) with the FCD and SSM device."""
-    return sumo_command(scenario, sd, seed, end_s, sd, fcd=True, ssm=True, ours=_output_args(sd), sumo_args=sumo_args)
+    runner's (``connection.sumo_command``) with the FCD and SSM device
+    (``devices``; tripinfo, collisions and statistics either way)."""
+    return sumo_command(scenario, sd, seed, end_s, sd, fcd=devices, ssm=devices, ours=output_args(sd), sumo_args=sumo_args)
+
 
 
 def run_treatment(scenario: Scenario, options: RunOptions, out: Path) -> Any:
@@ -120,5 +127,5 @@ def run_treatment(scenario: Scenario, options: RunOptions, out: Path) -> Any:
     sd.mkdir(parents=True, exist_ok=True)
     # The controlled vehicles' rows are in out/vehicles.csv (report.vehicle_ids): no records kept.
     options = dataclasses.replace(options, fcd=True, ssm=True, keep_records=False,
-                                  sumo_args=(*options.sumo_args, *_output_args(sd)))
+                                  sumo_args=(*options.sumo_args, *output_args(sd)))
     return run_scenario(scenario, options, out)
