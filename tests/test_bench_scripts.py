@@ -4,6 +4,8 @@ tests: see docs/performance.md)."""
 from __future__ import annotations
 
 import importlib.util
+import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -15,6 +17,8 @@ def _script(name: str):
     spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
     assert spec and spec.loader
     mod = importlib.util.module_from_spec(spec)
+    # (Registered first: a dataclass looks its module up while it is made.)
+    sys.modules[name] = mod
     spec.loader.exec_module(mod)
     return mod
 
@@ -39,3 +43,78 @@ def test_bench_sumo_counts_reject_what_is_not_a_count(bad):
     b = _script("bench_sumo")
     with pytest.raises(SystemExit, match="--counts"):
         b.parse_counts(f"10,{bad}")
+
+
+def _trip(vid: str, arrival: float, time_loss: float) -> str:
+    return f'<tripinfo id="{vid}" arrival="{arrival}" duration="10" timeLoss="{time_loss}"/>'
+
+
+def _seed_dir(root: Path, seed: int, treat_trips: list[str], base_trips: list[str], vehicles: list[tuple[str, float, int]],
+              summary: dict[str, int]) -> Path:
+    """A seed's two runs as the study reads them: the treatment's summary,
+    vehicles.csv (id, mean abs lateral error, missed exits) and trip info,
+    and the baseline's trip info."""
+    d = root / f"seed{seed}"
+    for kind, trips in (("treatment", treat_trips), ("baseline", base_trips)):
+        (d / kind / "sumo").mkdir(parents=True)
+        (d / kind / "sumo" / "tripinfo.xml").write_text("<tripinfos>" + "".join(trips) + "</tripinfos>")
+    full = {"collisions_with_controlled": 0, "red_light_crossings_sumo": 0, "teleports_controlled": 0,
+            "placement_faults": 0, "emergency_brakings": 0, **summary}
+    (d / "treatment" / "summary.json").write_text(json.dumps(full))
+    rows = "".join(f"{vid},{lat},{missed}\n" for vid, lat, missed in vehicles)
+    (d / "treatment" / "vehicles.csv").write_text("id,lateral_error_mean_abs_m,missed_exits\n" + rows)
+    return d
+
+
+def test_study_pools_the_acceptance_figures_over_seeds(tmp_path):
+    """Arrivals count a controlled vehicle only at its own destination (a
+    missed exit is not one), against the same vehicles under plain SUMO; the
+    background time loss is the mean over every background vehicle in both
+    runs of every seed; the lateral error the mean of the vehicles' own."""
+    s = _script("study_real_scenarios")
+    d0 = _seed_dir(tmp_path, 0,
+                   [_trip("c1", 50, 5), _trip("c2", 60, 5), _trip("c3", -1, 9), _trip("b1", 40, 12), _trip("b2", 45, 8),
+                    _trip("only_t", 30, 100)],
+                   [_trip("c1", 50, 1), _trip("c2", 60, 1), _trip("c3", 70, 1), _trip("b1", 40, 10), _trip("b2", 45, 6)],
+                   [("c1", 0.02, 0), ("c2", 0.04, 1), ("c3", 0.06, 0)],
+                   {"collisions_with_controlled": 2, "red_light_crossings_sumo": 1, "emergency_brakings": 3})
+    d1 = _seed_dir(tmp_path, 1,
+                   [_trip("c9", 20, 2), _trip("b9", 20, 30)],
+                   [_trip("c9", 20, 2), _trip("b9", 20, 20)],
+                   [("c9", 0.08, 0)], {"teleports_controlled": 1})
+    f0 = s.seed_figures(d0)
+    # c1 arrived; c2 arrived elsewhere (missed exit); c3 did not arrive. Plain: all three.
+    assert (f0["arrived"], f0["arrived_plain"], f0["missed_exits"], f0["controlled"]) == (1, 3, 1, 3)
+    # Background in both runs: b1, b2 (only_t is not in the baseline).
+    assert (f0["background"], f0["time_loss"], f0["time_loss_plain"]) == (2, 20.0, 16.0)
+    p = s.pool({0: f0, 1: s.seed_figures(d1)})
+    fig = p.figures()
+    assert fig["arrivals_ratio"] == pytest.approx(2 / 4)
+    assert fig["background_time_loss_change"] == pytest.approx((20 + 30) / (16 + 20) - 1)
+    assert fig["lateral_error_mean_abs_m"] == pytest.approx((0.02 + 0.04 + 0.06 + 0.08) / 4)
+    assert (fig["collisions_with_controlled"], fig["red_light_crossings"], fig["teleports_controlled"],
+            fig["emergency_brakings"]) == (2, 1, 1, 3)
+    text = s.table({"x": p})
+    assert "| collisions with a controlled vehicle | 0 | 2 (**not met**) |" in text
+    assert "| 0.500 (**not met**) |" in text and "+38.9 % (**not met**)" in text and "0.050 (met)" in text
+    assert "| 0-1; 4 |" in text
+
+
+def test_study_reports_a_failed_run_and_leaves_its_seed_out(tmp_path, monkeypatch, capsys):
+    s = _script("study_real_scenarios")
+    monkeypatch.setattr(s, "_run", lambda kind, scen, seed, out, args: (kind == "baseline", "SUMO crashed"))
+    code = s.main(["--scenario", "ring_single_lane", "--seeds", "2", "--jobs", "1", "--out", str(tmp_path)])
+    assert code == 1
+    text = (tmp_path / "study.md").read_text()
+    assert "ring_single_lane seed 0 left out: treatment: SUMO crashed" in text
+    assert "ring_single_lane seed 1 left out" in text and "none; 0" in text
+    assert "FAILED: SUMO crashed" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("bad", [["--seeds", "0"], ["--jobs", "0"], ["--fraction", "1.5"], ["--end", "-1"],
+                                 ["--", "--sumo-args", "--scale 2"], ["--scenario", "/no/such/file.sumocfg"]])
+def test_study_rejects_bad_options(bad, tmp_path):
+    s = _script("study_real_scenarios")
+    with pytest.raises(SystemExit) as e:
+        s.main([*bad, "--out", str(tmp_path)] if bad[0] != "--" else ["--out", str(tmp_path), *bad])
+    assert e.value.code == 2
