@@ -186,6 +186,8 @@ def table(pooled: dict[str, Pooled]) -> str:
 def _span(seeds: list[int]) -> str:
     if not seeds:
         return "none"
+    if len(seeds) == 1:
+        return str(seeds[0])
     return f"{seeds[0]}-{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) else ",".join(map(str, seeds))
 
 

@@ -3,6 +3,7 @@ tests: see docs/performance.md)."""
 
 from __future__ import annotations
 
+import csv
 import importlib.util
 import json
 import sys
@@ -118,3 +119,23 @@ def test_study_rejects_bad_options(bad, tmp_path):
     with pytest.raises(SystemExit) as e:
         s.main([*bad, "--out", str(tmp_path)] if bad[0] != "--" else ["--out", str(tmp_path), *bad])
     assert e.value.code == 2
+
+
+def test_study_runs_a_shipped_scenario_and_reuses_finished_runs(tmp_path):
+    """End to end on the shipped ring, 30 s, one seed: both runs made, the
+    table, per-seed rows and plot written; run again, the finished runs are
+    reused (their outputs untouched)."""
+    s = _script("study_real_scenarios")
+    argv = ["--scenario", "ring_single_lane", "--end", "30", "--seeds", "1", "--jobs", "2", "--out", str(tmp_path)]
+    assert s.main(argv) == 0
+    seed = tmp_path / "ring_single_lane" / "seed0"
+    assert (seed / "baseline" / s.DONE).exists() and (seed / "treatment" / s.DONE).exists()
+    text = (tmp_path / "study.md").read_text()
+    assert "| | target | ring_single_lane |" in text and "| 0; " in text
+    with open(tmp_path / "per_seed.csv") as f:
+        assert [r["seed"] for r in csv.DictReader(f)] == ["0"]
+    assert (tmp_path / "study.png").stat().st_size > 0
+    summary = seed / "treatment" / "summary.json"
+    before = summary.stat().st_mtime_ns
+    assert s.main(argv) == 0
+    assert summary.stat().st_mtime_ns == before
