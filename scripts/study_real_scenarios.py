@@ -101,18 +101,17 @@ def seed_figures(seed_dir: Path) -> dict[str, float]:
     """One seed's raw figures from its two runs under ``seed_dir``
     (``baseline/``, ``treatment/``): the summary's counts, and the sums
     ``pool`` adds up."""
+    from blendtrack.sumo.compare.metrics import read_vehicles
     from blendtrack.sumo.outputs import read_tripinfo
 
     treat = seed_dir / "treatment"
     summary = json.loads((treat / "summary.json").read_text())
-    with open(treat / "vehicles.csv") as f:
-        rows = list(csv.DictReader(f))
-    missed = {r["id"] for r in rows if float(r.get("missed_exits") or 0) > 0}
-    ctl = {r["id"] for r in rows}
+    lat_err, missed = read_vehicles(treat / "vehicles.csv", "lateral_error_mean_abs_m")
+    ctl = set(lat_err)
     tt = read_tripinfo(treat / "sumo" / "tripinfo.xml")
     tb = read_tripinfo(seed_dir / "baseline" / "sumo" / "tripinfo.xml")
     bg = [v for v in tt if v not in ctl and v in tb]
-    lat = [float(r["lateral_error_mean_abs_m"]) for r in rows if r.get("lateral_error_mean_abs_m")]
+    lat = [x for x in lat_err.values() if not math.isnan(x)]
     return {
         "collisions_with_controlled": summary["collisions_with_controlled"],
         "red_light_crossings": summary["red_light_crossings_sumo"],
@@ -163,9 +162,7 @@ def table(pooled: dict[str, Pooled]) -> str:
             return "n/a"
         if key == "background_time_loss_change":
             return f"{100 * x:+.1f} %"
-        if key in ("arrivals_ratio",):
-            return f"{x:.3f}"
-        if key.endswith("_m"):
+        if key == "arrivals_ratio" or key.endswith("_m"):
             return f"{x:.3f}"
         return f"{x:.0f}"
 
@@ -307,16 +304,16 @@ def plot(rows: list[dict[str, Any]], file: Path) -> None:
 
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
     names = sorted({str(r["scenario"]) for r in rows})
+    # (key of Pooled.figures, title, scale, target): each seed's own figures.
     panels = (
-        ("collisions with a controlled vehicle", lambda r: r["collisions_with_controlled"], 0.0),
-        ("arrivals / plain SUMO's", lambda r: r["arrived"] / r["arrived_plain"] if r["arrived_plain"] else math.nan, 0.9),
-        ("background time loss change (%)",
-         lambda r: 100 * (r["time_loss"] / r["time_loss_plain"] - 1) if r["time_loss_plain"] else math.nan, 10.0),
+        ("collisions_with_controlled", "collisions with a controlled vehicle", 1.0, 0.0),
+        ("arrivals_ratio", "arrivals / plain SUMO's", 1.0, 0.9),
+        ("background_time_loss_change", "background time loss change (%)", 100.0, 10.0),
     )
-    for ax, (title, value, target) in zip(axes, panels):
+    for ax, (key, title, scale, target) in zip(axes, panels):
         for name in names:
             mine = [r for r in rows if r["scenario"] == name]
-            ax.plot([r["seed"] for r in mine], [value(r) for r in mine], "o-", label=name, ms=4)
+            ax.plot([r["seed"] for r in mine], [scale * pool({0: r}).figures()[key] for r in mine], "o-", label=name, ms=4)
         ax.axhline(target, color="k", ls="--", lw=1, label="target")
         ax.set_title(title, fontsize=10)
         ax.set_xlabel("seed")

@@ -71,17 +71,17 @@ def vehicle_metrics(tr: Track, trip: dict[str, float] | None, dt: float, comfort
     }
 
 
-def read_vehicles(vehicles_csv: Path) -> tuple[dict[str, float], set[str]]:
+def read_vehicles(vehicles_csv: Path, lateral: str = "lateral_error_rms_m") -> tuple[dict[str, float], set[str]]:
     """From a run's ``vehicles.csv`` (nothing when there is no such file):
-    each vehicle's RMS lateral error (NaN where empty), and the vehicles
-    that gave up an exit (``missed_exits`` > 0, none in a file from before
-    that column; ``RunOptions.miss_exit_after_s``)."""
+    each vehicle's lateral error of column ``lateral`` (RMS by default; NaN
+    where empty), and the vehicles that gave up an exit (``missed_exits`` >
+    0, none in a file from before that column; ``RunOptions.miss_exit_after_s``)."""
     lat_err: dict[str, float] = {}
     missed: set[str] = set()
     if vehicles_csv.exists():
         with open(vehicles_csv) as f:
             for row in csv.DictReader(f):
-                lat_err[row["id"]] = float(row["lateral_error_rms_m"]) if row["lateral_error_rms_m"] else math.nan
+                lat_err[row["id"]] = float(row[lateral]) if row[lateral] else math.nan
                 if float(row.get("missed_exits") or 0) > 0:
                     missed.add(row["id"])
     return lat_err, missed

@@ -119,7 +119,6 @@ def baseline_command(scenario: Scenario, seed: int, end_s: float | None, sd: Pat
     return sumo_command(scenario, sd, seed, end_s, sd, fcd=devices, ssm=devices, ours=output_args(sd), sumo_args=sumo_args)
 
 
-
 def run_treatment(scenario: Scenario, options: RunOptions, out: Path) -> Any:
     from blendtrack.sumo import run_scenario
 
