@@ -8,6 +8,7 @@ most), as SUMO's drivers do (``MSLink``'s zipper speed)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 from blendtrack.sumo.connection import SumoConnection
@@ -56,7 +57,7 @@ class Zippers:
         return self._zips
 
     @staticmethod
-    def _upstream(lane: Any, chain: list[Any], via_len: float) -> list[tuple[str, float]]:
+    def _upstream(lane: Any, chain: Sequence[Any], via_len: float) -> list[tuple[str, float]]:
         """The lanes a foe comes along to the merge point through ``via``,
         each with the distance from its end to the merge point: the zipper
         link's junction lane and incoming lane, then back up lanes that lead
