@@ -1371,7 +1371,7 @@ def test_a_barely_started_lane_change_is_given_up_when_its_room_goes(monkeypatch
     lcs = lane_changes(conn)
     aborted: list[str] = []
     monkeypatch.setattr(lcs, "abort_change", lambda act: aborted.append(act.vid))
-    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0)  # type: ignore[arg-type]
+    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0, change_edge="e")  # type: ignore[arg-type]
     need = 5.0 + 18.0 * math.sqrt(20.0) - 10.0
     for gap, lat, index, gives_up in [(need - 1e-3, 0.1, 0, True), (need + 1e-3, 0.1, 0, False), (need - 1e-3, 0.6, 0, False),
                                       (need - 1e-3, 0.1, 1, False)]:
@@ -1381,6 +1381,13 @@ def test_a_barely_started_lane_change_is_given_up_when_its_room_goes(monkeypatch
         conn.vehicle.neighbours = {("me", 0): [("f", gap)]}
         lcs.changing_leader(act, None)
         assert aborted == (["me"] if gives_up else []), (gap, lat, index)
+    # Two edges on, on a lane of the index it left and near its centre,
+    # with no room: the change is over, not given up.
+    conn.vehicle.cars["me"].update(lane="g_0", lane_index=0, lat=0.1)
+    conn.vehicle.neighbours = {("me", 0): [("f", need - 1e-3)]}
+    aborted.clear()
+    assert lcs.changing_leader(act, None) is None
+    assert aborted == [] and act.changing is None
 
 
 def test_a_change_under_way_is_seen_by_the_nearest_vehicle_behind_on_each_lane_it_moves_onto() -> None:
@@ -1402,7 +1409,7 @@ def test_a_change_under_way_is_seen_by_the_nearest_vehicle_behind_on_each_lane_i
         v.add(vid, pos=pos, speed=10.0)
     conn.lanes = {"e_1": ["c0", "c1", "s1"], "e_2": ["c2", "d2", "a2"]}
     lcs = lane_changes(conn, feeders={"e_2": ((":j_1", 20.0),)})
-    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0)  # type: ignore[arg-type]
+    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0, change_edge="e")  # type: ignore[arg-type]
     lcs.active.update({"me": act, "c1": act, "c0": act, "c2": act})
     index = {"me": 0, "c1": 1, "c0": 2, "c2": 4}
     lcs.seen_coming(act, 0, 2)
@@ -1462,7 +1469,7 @@ def test_a_sumo_driver_behind_a_change_it_cannot_see_yet_is_capped_for_one_step(
     v.add("d", lane="e_1", pos=80.0, speed=14.0)
     conn.lanes = {"e_1": ["d"]}
     lcs = lane_changes(conn)
-    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0)  # type: ignore[arg-type]
+    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0, change_edge="e")  # type: ignore[arg-type]
     lcs.active["me"] = act
     lcs.seen_coming(act, 0, 1)
     cap = -4.5 + math.sqrt(4.5**2 + 8.0**2 + 9.0 * 12.5)
@@ -1577,7 +1584,7 @@ def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(
     aborted: list[str] = []
     monkeypatch.setattr(lcs, "abort_change", lambda act: aborted.append(act.vid))
     monkeypatch.setattr(lcs, "left_behind", lambda act, lead: False)
-    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0)  # type: ignore[arg-type]
+    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0, change_edge="e")  # type: ignore[arg-type]
     # Changing left (side 0): followers mode 0, leaders mode 2.
     for followers, leaders, index, goes_back in [
         ([("x", -3.3)], [], 0, True),
@@ -1591,7 +1598,7 @@ def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(
         v.neighbours = {("me", 0): followers, ("me", 2): leaders}
         lcs.changing_leader(act, None)
         assert aborted == (["me"] if goes_back else []), (followers, leaders, index)
-    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0)  # type: ignore[arg-type]
+    act = Active("me", 0, None, "", None, changing=(1, 2), change_from=0, change_edge="e")  # type: ignore[arg-type]
     v.cars["me"]["lane"] = "e_1"
     for followers, index, goes_back in [([("x", -3.3)], 1, True), ([("x", 4.0)], 1, False)]:
         aborted.clear()
@@ -1923,7 +1930,7 @@ def test_a_leader_counts_when_the_vehicle_is_on_an_edge_without_the_target_lane(
     lcs = lane_changes(conn)
     net = Net({"f_0": FakeLane(100.0), "f_1": FakeLane(100.0)})
     lcs.network = SimpleNamespace(net=lambda: net)  # type: ignore[assignment]
-    act = Active("me", 0, None, "", None, changing=(1, 3), change_span=(10.0, 20.0), change_from=1)  # type: ignore[arg-type]
+    act = Active("me", 0, None, "", None, changing=(1, 3), change_span=(10.0, 20.0), change_from=1, change_edge="e")  # type: ignore[arg-type]
     assert lcs.left_behind(act, ("lead", 30.0)) is False
 
 
@@ -2330,7 +2337,7 @@ def test_drivers_beyond_the_target_lane_are_held_while_a_change_goes_on() -> Non
         v.add(vid, lane="e_2", pos=pos, speed=12.0)
     conn.lanes = {"e_2": ["back", "edge", "calm", "ctl", "w", "far"]}
     lcs = lane_changes(conn)
-    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0)  # type: ignore[arg-type]
+    act = Active("me", 0, None, "", None, changing=(1, 1), change_from=0, change_edge="e")  # type: ignore[arg-type]
     lcs.active.update({"me": act, "ctl": act})
     lcs.hold_far_side(act, "e", 2, 45.0, 50.0)
     assert v.calls == []  # no span yet: not under way

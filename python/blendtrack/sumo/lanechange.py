@@ -235,7 +235,13 @@ class LaneChanges:
         v = self.conn.sumo.vehicle
         direction, target = act.changing  # type: ignore[misc]
         index = v.getLaneIndex(act.vid)
-        if index == target:
+        if index == target or v.getRoadID(act.vid) != act.change_edge:
+            # On the target lane, or past the edge of the change: over. (A
+            # change that ended at its edge's end with SUMO never showing
+            # the vehicle on the target lane stayed under way: two edges on,
+            # on a lane of the index it had left, it was taken for barely
+            # started, given up, and put back 11 m sideways onto the old
+            # edge's lane, into a driver there; Eccles, 30 %, seed 7, 571 s.)
             self.set_changing(act, None)
             return lead
         if act.tactical:
@@ -449,6 +455,7 @@ class LaneChanges:
         self.set_changing(act, (direction, target))
         act.change_span = span
         act.change_from = int(self.conn.sumo.vehicle.getLaneIndex(act.vid))
+        act.change_edge = str(self.conn.sumo.vehicle.getRoadID(act.vid))
         act.record.lane_changes += 1
 
     # ---------------------------------------------------- the route's changes

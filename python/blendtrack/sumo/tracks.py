@@ -82,6 +82,8 @@ class Active:
     change_span: tuple[float, float] | None = None
     #: The lane index the change under way started from.
     change_from: int = -1
+    #: The edge the change under way is made on.
+    change_edge: str = ""
     #: The track built for this vehicle alone (a lane change in it), removed
     #: from the RouteFleet once the vehicle leaves it; None on a shared track.
     own_track: int | None = None
