@@ -1562,6 +1562,36 @@ def test_a_change_over_three_lanes_needs_room_behind_on_the_lanes_between() -> N
     assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0)
 
 
+def test_a_change_over_three_lanes_sweeps_behind_the_vehicles_ahead_on_the_lanes_between() -> None:
+    """From lane 1 to lane 4 from a standstill, front at 10 m, 10 m long:
+    at the planning acceleration (1 m/s^2) the front is 10 u m on after
+    sqrt(20 u) s, and the body is over lane 3 while 3 smoothstep(u) - 2
+    is within 0.75 of it (u from 0.45 to 0.80 at the 21 samples). A car
+    standing ahead there needs its back 10 + 8 + 2.5 (minGap) = 20.5 m
+    on: its front at 25 m (back 20) stops the change, at 26 m it does not.
+    Lane 2 (beside) and 4 (the last) are others' checks. A car on lane 3
+    with its front at 15 m that drives at 13 m/s leaves room; at 1 m/s
+    its back is at 13 m when the front reaches 14.5 m (u = 0.45, 3 s):
+    no room."""
+    conn = FakeConn()
+    v = conn.vehicle
+    v.add("me", pos=10.0, speed=0.0)
+    v.add("d", pos=25.0, speed=0.0)
+    lcs = lane_changes(conn)
+    for lane, room in [("e_3", False), ("e_2", True), ("e_4", True)]:
+        conn.lanes = {f"e_{k}": [] for k in range(6)}
+        conn.lanes[lane] = ["d"]
+        assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0) is room, lane
+    conn.lanes = {f"e_{k}": [] for k in range(6)}
+    conn.lanes["e_3"] = ["d"]
+    v.cars["d"]["pos"] = 26.0
+    assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0)
+    v.cars["d"].update(pos=15.0, speed=13.0)
+    assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0)
+    v.cars["d"].update(speed=1.0)
+    assert not lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0)
+
+
 def test_a_change_past_its_point_of_no_return_goes_back_for_a_vehicle_alongside(monkeypatch: pytest.MonkeyPatch) -> None:
     """A change the route needs, 0.8 m across (past giving up by its
     offset), SUMO still having the vehicle on the lane it leaves: a vehicle
