@@ -644,16 +644,30 @@ mod tests {
         // centreline (moved by (x, y)), with the simulator's front a few
         // centimetres ahead, as SUMO maps a front put on a curved junction
         // lane: the state stays where it stands, step after step (caught
-        // up every step, a left turner crept over its waiting point).
-        for ahead in [0.03, 0.5] {
-            let (mut f, t) = fleet_on(road(None, true));
-            let mut st = at(50.0, 0.0);
+        // up every step, a left turner crept over its waiting point). On a
+        // road's lane (10) up to 0.3 m, on a junction lane (11, here lying
+        // on the track) up to 0.75 m.
+        for (lane, x, ahead) in [
+            (10, 50.0, 0.03),
+            (10, 50.0, 0.25),
+            (11, 201.0, 0.03),
+            (11, 201.0, 0.5),
+        ] {
+            let (path, mut route) = road(None, true);
+            if lane == 11 {
+                let mut pieces = route.pieces().to_vec();
+                pieces[1].offset_m = 0.0;
+                route = Route::new(pieces, route.stops().to_vec(), 600.0, None).unwrap();
+            }
+            let (mut f, t) = fleet_on((path, route));
+            let mut st = at(x, 0.0);
             st.y_m = 0.6;
             let a = f.add_vehicle(t, None, None, body(), st, None).unwrap() as i64;
             let sf = f.s_front(a).unwrap();
             for _ in 0..5 {
                 let now = f.s_front(a).unwrap();
-                plan_one(&mut f, a, (1.0, 0.0), (10, now + ahead));
+                let pos = if lane == 10 { now } else { now - 200.0 };
+                plan_one(&mut f, a, (1.0, 0.0), (lane, pos + ahead));
                 let out = f.step(&[], DT).unwrap();
                 assert_eq!(out.v_mps[0], 0.0);
                 assert!(
@@ -663,7 +677,10 @@ mod tests {
                 );
             }
             let crept = f.s_front(a).unwrap() - sf;
-            assert!(crept.abs() < 1e-9, "{ahead} m ahead: crept {crept} m");
+            assert!(
+                crept.abs() < 1e-9,
+                "lane {lane}, {ahead} m ahead: crept {crept} m"
+            );
         }
     }
 
@@ -672,24 +689,28 @@ mod tests {
         // As above, but the simulator has the front 1 m ahead (a crawl it
         // ran ahead of, then a stop): the state goes on to where the
         // simulator has it once, and stays there; put back, the car landed
-        // on the driver behind it (Eccles, seed 17, 342 s).
-        let (mut f, t) = fleet_on(road(None, true));
-        let mut st = at(50.0, 0.0);
-        st.y_m = 0.6;
-        let a = f.add_vehicle(t, None, None, body(), st, None).unwrap() as i64;
-        let sf = f.s_front(a).unwrap();
-        plan_one(&mut f, a, (1.0, 0.0), (10, sf + 1.0));
-        let out = f.step(&[], DT).unwrap();
-        assert_eq!((out.v_mps[0], out.moves[0]), (0.0, Move::Xy));
-        let moved = f.s_front(a).unwrap() - sf;
-        assert!((moved - 1.0).abs() < 1e-6, "moved {moved}");
-        assert!(out.x_front_m[0] >= sf + 1.0 - 1e-6, "{out:?}");
-        for _ in 0..3 {
-            let now = f.s_front(a).unwrap();
-            plan_one(&mut f, a, (1.0, 0.0), (10, now));
-            f.step(&[], DT).unwrap();
+        // on the driver behind it (Eccles, seed 17, 342 s). On a road's lane
+        // from 0.3 m: put back 0.65 m, another landed inside the minGap of
+        // the driver behind (Eccles, seed 17, 397 s).
+        for ahead in [1.0, 0.65, 0.31] {
+            let (mut f, t) = fleet_on(road(None, true));
+            let mut st = at(50.0, 0.0);
+            st.y_m = 0.6;
+            let a = f.add_vehicle(t, None, None, body(), st, None).unwrap() as i64;
+            let sf = f.s_front(a).unwrap();
+            plan_one(&mut f, a, (1.0, 0.0), (10, sf + ahead));
+            let out = f.step(&[], DT).unwrap();
+            assert_eq!((out.v_mps[0], out.moves[0]), (0.0, Move::Xy));
+            let moved = f.s_front(a).unwrap() - sf;
+            assert!((moved - ahead).abs() < 1e-6, "{ahead}: moved {moved}");
+            assert!(out.x_front_m[0] >= sf + ahead - 1e-6, "{out:?}");
+            for _ in 0..3 {
+                let now = f.s_front(a).unwrap();
+                plan_one(&mut f, a, (1.0, 0.0), (10, now));
+                f.step(&[], DT).unwrap();
+            }
+            assert!((f.s_front(a).unwrap() - sf - ahead).abs() < 1e-6);
         }
-        assert!((f.s_front(a).unwrap() - sf - 1.0).abs() < 1e-6);
     }
 
     #[test]

@@ -5,6 +5,7 @@
 use crate::error::check_len;
 use crate::placement::{choose_move, Motion, Move};
 use crate::plan::Plan;
+use crate::route::Route;
 use crate::signal::{signal_at, Signal};
 use crate::substep::{
     advance, braking_mean_speed, control_record, held_speed, past_route_end, state_at,
@@ -326,7 +327,7 @@ impl RouteFleet {
         let mut p = choose_move(d, k, &st, &motion);
         if v < CATCH_UP_BELOW_MPS {
             if let Some(ahead) = simulator_ahead(d, k, sf_new).filter(|&ahead| {
-                (p.mv == Move::Xy && (v > 0.0 || ahead > CATCH_UP_STANDING_M))
+                (p.mv == Move::Xy && (v > 0.0 || ahead > catch_up_standing_m(&d.route, sf_new)))
                     || ((p.mv == Move::Speed || p.mv == Move::Hold)
                         && ahead > CATCH_UP_SPEED_MOVE_M)
             }) {
@@ -519,6 +520,29 @@ const CATCH_UP_SPEED_MOVE_M: f64 = 1.0;
 /// was put back onto the driver behind it (Eccles, 30 %, seed 17, 342 s,
 /// 145852815_3).
 const CATCH_UP_STANDING_M: f64 = 0.75;
+
+/// The same off junction lanes, where the track lies on a lane SUMO maps
+/// a front onto exactly: a car that had stopped 0.65 m behind where SUMO
+/// had it after a crawl, 2.4 deg off its track (so moved by (x, y)), was
+/// put back into the minGap of the driver behind it (Eccles, 30 %, seed
+/// 17, 397 s, 296702213_0).
+const CATCH_UP_STANDING_ROAD_M: f64 = 0.3;
+
+/// How far ahead (m) the simulator may have a standing vehicle's front
+/// before a move by (x, y) catches up with it, at arc length `s` of `route`:
+/// [`CATCH_UP_STANDING_M`] inside a junction (from a stop line to where the
+/// junction is left), [`CATCH_UP_STANDING_ROAD_M`] elsewhere.
+fn catch_up_standing_m(route: &Route, s: f64) -> f64 {
+    if route
+        .stops()
+        .iter()
+        .any(|stop| stop.s_m <= s && s < stop.exit_m)
+    {
+        CATCH_UP_STANDING_M
+    } else {
+        CATCH_UP_STANDING_ROAD_M
+    }
+}
 
 /// The most (m) a piece's track may lie off its lane's centreline for
 /// [`simulator_ahead`] to compare lane positions there.
