@@ -1524,6 +1524,13 @@ def test_room_on_the_far_lane_counts_a_vehicle_still_in_the_junction_before_it()
     assert lcs.room_on_lane("me", "e_2", 10.0, 0.0, 10.0)
 
 
+def _only_on(conn: FakeConn, lane: str | None) -> None:
+    """Edge ``e``'s six lanes empty but ``lane``, which holds vehicle ``d``."""
+    conn.lanes = {f"e_{k}": [] for k in range(6)}
+    if lane is not None:
+        conn.lanes[lane] = ["d"]
+
+
 def test_a_change_over_three_lanes_needs_room_behind_on_the_lanes_between() -> None:
     """From lane 1 to lane 4 from a standstill, front at 10 m, 10 m long
     (sqrt(20) s at 1 m/s^2): lane 3, between the lane beside (2) and the
@@ -1539,12 +1546,9 @@ def test_a_change_over_three_lanes_needs_room_behind_on_the_lanes_between() -> N
     v.add("d", pos=0.0, speed=13.0)
     lcs = lane_changes(conn)
     for lane, room in [("e_3", False), ("e_2", True), ("e_4", True), ("e_5", True), (None, True)]:
-        conn.lanes = {f"e_{k}": [] for k in range(6)}
-        if lane is not None:
-            conn.lanes[lane] = ["d"]
+        _only_on(conn, lane)
         assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0) is room, lane
-    conn.lanes = {f"e_{k}": [] for k in range(6)}
-    conn.lanes["e_3"] = ["d"]
+    _only_on(conn, "e_3")
     v.cars["d"]["pos"] = 30.0
     assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0)
     v.cars["d"]["pos"] = 0.0
@@ -1579,11 +1583,9 @@ def test_a_change_over_three_lanes_sweeps_behind_the_vehicles_ahead_on_the_lanes
     v.add("d", pos=25.0, speed=0.0)
     lcs = lane_changes(conn)
     for lane, room in [("e_3", False), ("e_2", True), ("e_4", True)]:
-        conn.lanes = {f"e_{k}": [] for k in range(6)}
-        conn.lanes[lane] = ["d"]
+        _only_on(conn, lane)
         assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0) is room, lane
-    conn.lanes = {f"e_{k}": [] for k in range(6)}
-    conn.lanes["e_3"] = ["d"]
+    _only_on(conn, "e_3")
     v.cars["d"]["pos"] = 26.0
     assert lcs.room_between("me", "e", 1, 4, 10.0, 0.0, 10.0)
     v.cars["d"].update(pos=15.0, speed=13.0)
