@@ -862,9 +862,9 @@ class LaneChanges:
         met on the last lane."""
         v = self.conn.sumo.vehicle
         get_pos, get_speed = self.conn.get_lane_pos, self.conn.get_speed
-        ahead = [(float(get_pos(o)) - float(v.getLength(o)), float(get_speed(o)))
-                 for o in self.conn.vehicles_on(lane) if o != vid]
-        ahead = [(b, s) for b, s in ahead if b + 1e-9 >= front - float(v.getLength(vid))]
+        own_back = front - float(v.getLength(vid))
+        backs = ((o, float(get_pos(o)) - float(v.getLength(o))) for o in self.conn.vehicles_on(lane) if o != vid)
+        ahead = [(b, float(get_speed(o))) for o, b in backs if b + 1e-9 >= own_back]
         if not ahead:
             return True
         gap_needed = float(v.getMinGap(vid))
