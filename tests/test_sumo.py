@@ -843,8 +843,6 @@ def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytes
     """libsumo crashes on some malformed networks, so a scenario is first
     loaded in a child sumo; one that loaded before, byte for byte, is not
     loaded again. A change to any of its files is a new check."""
-    import subprocess as sp
-
     from blendtrack.sumo import connection
 
     monkeypatch.setenv("BLENDTRACK_CACHE_DIR", str(tmp_path / "cache"))
@@ -852,13 +850,13 @@ def test_scenario_check_runs_once_per_content(tmp_path: Path, monkeypatch: pytes
     shutil.copytree(SCENARIOS / "ring_single_lane", folder)
     sc = sumo.resolve_scenario(str(folder))
     children: list[list[str]] = []
-    real_run = sp.run
+    real_load = connection._load_once
 
-    def counting_run(cmd, *a, **k):  # type: ignore[no-untyped-def]
+    def counting_load(cmd, *a, **k):  # type: ignore[no-untyped-def]
         children.append(list(cmd))
-        return real_run(cmd, *a, **k)
+        return real_load(cmd, *a, **k)
 
-    monkeypatch.setattr(sp, "run", counting_run)
+    monkeypatch.setattr(connection, "_load_once", counting_load)
     check = lambda: SumoRun(sc, RunOptions(progress=False), None).conn.check_loads()  # noqa: E731
     check()
     check()

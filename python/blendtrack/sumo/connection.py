@@ -313,29 +313,34 @@ class SumoConnection:
         return v + 0.5 * a * dt
 
     def check_loads(self) -> None:
-        """Loads the scenario once in a child ``sumo`` (see ``start``). A
-        scenario that loaded before, byte for byte with the same SUMO binary,
-        is not loaded again (``loads_ok_marker``): the check costs a second
-        on the highway, once per run otherwise (batch sweeps, benchmarks)."""
-        import subprocess
-
+        """Loads the scenario once in a child ``sumo`` (see ``start``), with
+        the run's own time window: SUMO is started with TraCI, takes one step
+        (the run's first, which reads the first of the routes) and is closed.
+        An end before the run's own would make SUMO refuse scenarios it runs:
+        an ``<edgeData>`` dump or a ``<flow>`` without an end of its own takes
+        the run's, and SUMO refuses one that ends at or before its begin (the
+        scenarios of SUMO's ``tools/game`` did so with ``--end 0``). A
+        scenario that loaded before, byte for byte with the same SUMO binary
+        and options, is not loaded again (``loads_ok_marker``): the check
+        costs a second on the highway, once per run otherwise (batch sweeps,
+        benchmarks)."""
         binary = sumo_binary(False)
-        marker = loads_ok_marker(self.scenario, binary, tuple(self.opt.sumo_args))
+        # SUMO refuses an option given twice: the user's extra options replace
+        # the check's quiet flags, and the run's end replaces theirs.
+        quiet = ["--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
+        end = ["--end", str(self.opt.end_s)] if self.opt.end_s is not None else []
+        opts = override_options(override_options(quiet, list(self.opt.sumo_args)), end)
+        marker = loads_ok_marker(self.scenario, binary, tuple(self.opt.sumo_args) + tuple(end))
         if marker is not None and marker.exists():
             return
-        # SUMO refuses an option given twice: the user's extra options replace
-        # the check's quiet flags, and the check's --end 0 replaces theirs.
-        quiet = ["--no-step-log", "true", "--duration-log.disable", "true", "--no-warnings", "true"]
-        opts = override_options(override_options(quiet, list(self.opt.sumo_args)), ["--end", "0"])
         try:
             with tempfile.TemporaryDirectory(prefix="blendtrack-check-") as tmp:
                 cmd = [binary, "-c", str(self.scenario.run_config(Path(tmp))), *opts]
-                proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-        except (OSError, subprocess.TimeoutExpired) as e:
+                code, lines = _load_once(cmd, Path(tmp) / "check.log")
+        except (OSError, TimeoutError) as e:
             raise ScenarioError(f"{self.scenario.sumocfg}: cannot run SUMO to check the scenario: {e}") from None
-        if proc.returncode != 0:
-            lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
-            crash = f"SUMO crashed while loading it (signal {-proc.returncode})" if proc.returncode < 0 else f"exit code {proc.returncode}"
+        if code != 0:
+            crash = f"SUMO crashed while loading it (signal {-code})" if code < 0 else f"exit code {code}"
             errors = [ln for ln in lines if "Error" in ln] or lines or [crash]
             raise ScenarioError(f"{self.scenario.sumocfg}: SUMO refused to start: {errors[0].strip()}")
         if marker is not None:
@@ -380,6 +385,47 @@ class SumoConnection:
                 call(vid, *args)
             except Exception:
                 pass
+
+
+#: How long the load check waits for SUMO (s).
+CHECK_TIMEOUT_S = 600.0
+
+
+def _load_once(cmd: list[str], log: Path) -> tuple[int, list[str]]:
+    """Runs ``cmd`` (a ``sumo`` command) as a TraCI server in a child
+    process, connects, takes one step and closes: SUMO's exit code (negative:
+    killed by that signal) and the non-empty lines it wrote. A ``TimeoutError``
+    when SUMO neither connects nor ends within ``CHECK_TIMEOUT_S``."""
+    import contextlib
+    import io
+    import subprocess
+
+    import traci
+    from sumolib.miscutils import getFreeSocketPort  # type: ignore[import-untyped]
+
+    port = getFreeSocketPort()
+    with open(log, "w") as out:
+        proc = subprocess.Popen([*cmd, "--remote-port", str(port)], stdout=out, stderr=subprocess.STDOUT)
+        try:
+            wait_s = 0.05
+            try:
+                # (traci prints each retry: kept out of the user's terminal.)
+                with contextlib.redirect_stdout(io.StringIO()):
+                    conn = traci.connect(port, numRetries=int(CHECK_TIMEOUT_S / wait_s), proc=proc, waitBetweenRetries=wait_s)
+                conn.simulationStep()
+                conn.close()
+            except (traci.TraCIException, traci.FatalTraCIError, OSError):
+                pass  # SUMO quit: its exit code and output say why
+            try:
+                code = proc.wait(timeout=CHECK_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                raise TimeoutError(f"SUMO did not end within {CHECK_TIMEOUT_S:g} s") from None
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    lines = [ln for ln in log.read_text(errors="replace").splitlines() if ln.strip()]
+    return code, lines
 
 
 def _no_simulation(lane: str) -> Any:

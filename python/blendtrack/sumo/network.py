@@ -28,6 +28,18 @@ def edge_of(lane: str) -> str:
     return lane.rsplit("_", 1)[0]
 
 
+def _matrix_bit(rows: dict[int, str], i: int, j: int) -> bool:
+    """Bit ``j`` of row ``i`` of a junction's right-of-way matrix (sumolib's
+    ``Node._foes`` or ``_prohibits``: per link index a string, link 0 last).
+    False where the junction has no such row or bit: an unregulated junction
+    (``type="unregulated"``) has no ``<request>``s at all, and neither its
+    links nor a link that is not the junction's (index -1) have foes. SUMO's
+    ``tools/game/grid6`` has four such junctions; sumolib's ``areFoes`` raised
+    a ``KeyError`` there."""
+    row = rows.get(i) if i >= 0 and j >= 0 else None
+    return row is not None and j < len(row) and row[len(row) - j - 1] == "1"
+
+
 class Network:
     """The network of one scenario, read once (with its internal lanes) when first needed."""
 
@@ -373,7 +385,8 @@ class Network:
 
             def foes(node: Any, c: Any, other: Any) -> bool:
                 i, j = self._link_index(node, c), self._link_index(node, other)
-                return i >= 0 and j >= 0 and bool(node.areFoes(i, j))
+                # What ``Node.areFoes`` reads.
+                return _matrix_bit(node._foes, i, j)
 
             hit = self._foes[via] = self._conflicting(via, foes)
         return hit
@@ -390,10 +403,8 @@ class Network:
         """sumolib's ``node.forbids(other, c)`` (does ``other`` prohibit
         ``c`` by the right-of-way matrix?) with the link indices cached."""
         prohibitor, prohibited = self._link_index(node, other), self._link_index(node, c)
-        if prohibitor < 0 or prohibited < 0:
-            return False
         # What ``Node.forbids`` reads, by the indices it would compute.
-        return bool(node._prohibits[prohibited][-(prohibitor + 1)] == "1")
+        return _matrix_bit(node._prohibits, prohibited, prohibitor)
 
     def _conflicting(self, via: str, conflicts: Any) -> list[tuple[str, str | None, float, str, int]]:
         """The junction lanes of the connections ``other`` of ``via``'s

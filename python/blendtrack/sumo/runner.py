@@ -322,12 +322,13 @@ class SumoRun:
     def _loop(self, end: float | None) -> int:
         sumo = self.conn.sumo
         bar = None
+        # (A scenario's begin can be hours in: Braunschweig's 15:0:0 in SUMO's tools/game.)
+        last_t = float(int(float(sumo.simulation.getTime())))
         if self.opt.progress and end is not None:
             from tqdm import tqdm
 
-            bar = tqdm(total=round(end), unit="sim s", desc=self.scenario.name, leave=False, dynamic_ncols=True)
+            bar = tqdm(total=max(round(end - last_t), 0), unit="sim s", desc=self.scenario.name, leave=False, dynamic_ncols=True)
         steps = 0
-        last_t = 0.0
         while True:
             t = float(sumo.simulation.getTime())
             if end is not None and t >= end - 1e-9:

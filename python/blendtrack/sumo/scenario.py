@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from blendtrack.sumo.sumocfg import ScenarioError, SumoConfig, is_config, iter_xml, mentions
+from blendtrack.sumo.sumocfg import ScenarioError, SumoConfig, is_config, iter_xml, mentions, sumo_seconds
 
 #: The repository's scenario folder (present in a source checkout).
 SCENARIO_ROOT = Path(__file__).resolve().parents[3] / "sumo_scenarios"
@@ -60,6 +60,8 @@ class Scenario:
     meta: dict[str, Any] = field(default_factory=dict)
     step_length_s: float = 1.0
     end_s: float | None = None
+    #: The configuration's ``begin`` (s; SUMO's default 0).
+    begin_s: float = 0.0
     additional_files: list[Path] = field(default_factory=list)
 
     def config(self) -> SumoConfig:
@@ -160,12 +162,17 @@ def resolve_scenario(spec: str | Path) -> Scenario:
     route_files = cfg.files("route-files")
     additional_files = cfg.files("additional-files")
     step = cfg.option("step-length")
-    end = cfg.option("end")
+    times: dict[str, float | None] = {}
+    for name in ("begin", "end"):
+        value = cfg.option(name)
+        try:
+            times[name] = sumo_seconds(value) if value else None
+        except ValueError:
+            raise ScenarioError(f"{sumocfg}: {name} {value!r} is not a time (seconds, H:M:S or D:H:M:S)") from None
     try:
         step_length = float(step) if step else 1.0
-        end_s = float(end) if end else None
     except ValueError:
-        raise ScenarioError(f"{sumocfg}: step-length or end is not a number") from None
+        raise ScenarioError(f"{sumocfg}: step-length {step!r} is not a number") from None
     if not step_length > 0:
         raise ScenarioError(f"{sumocfg}: step-length must be > 0, got {step_length}")
     return Scenario(
@@ -177,5 +184,6 @@ def resolve_scenario(spec: str | Path) -> Scenario:
         additional_files=additional_files,
         meta=meta,
         step_length_s=step_length,
-        end_s=end_s,
+        end_s=times["end"],
+        begin_s=times["begin"] or 0.0,
     )

@@ -125,6 +125,42 @@ def is_config(file: Path) -> bool:
     return False
 
 
+def sumo_seconds(text: str) -> float:
+    """A time as SUMO reads one (``value="15:0:0"`` in a configuration,
+    ``--begin 54000``): seconds, ``H:M:S`` or ``D:H:M:S``; a ``ValueError``
+    for anything else."""
+    parts = text.strip().split(":")
+    if len(parts) == 1:
+        return float(parts[0])
+    if len(parts) not in (3, 4):
+        raise ValueError(f"{text!r} is not a time (seconds, H:M:S or D:H:M:S)")
+    seconds = 0.0
+    for part, unit in zip(reversed(parts), (1.0, 60.0, 3600.0, 86400.0)):
+        seconds += float(part) * unit
+    return seconds
+
+
+def take_option(args: list[str], names: tuple[str, ...]) -> tuple[list[str], str | None]:
+    """``args`` without the option ``names`` (``--end 5`` or ``--end=5``), and its value."""
+    kept: list[str] = []
+    value: str | None = None
+    i = 0
+    while i < len(args):
+        a = args[i]
+        name, eq, inline = a.partition("=")
+        if a.startswith("-") and name.lstrip("-") in names and (name.startswith("--") or len(name) == 2):
+            if eq:
+                value = inline
+                i += 1
+            else:
+                value = args[i + 1] if i + 1 < len(args) else ""
+                i += 2
+            continue
+        kept.append(a)
+        i += 1
+    return kept, value
+
+
 def _split(value: str) -> list[str]:
     return [x for x in value.replace(",", " ").split() if x]
 

@@ -1,0 +1,80 @@
+"""Scenarios nobody on this project wrote: the ones that ship with SUMO's own
+tools (``$SUMO_HOME/tools/game``, in the eclipse-sumo wheel). Each found
+something the shipped scenarios and the two public ones did not: an
+``<edgeData>`` dump and ``<flow>``s without an end of their own (the load
+check's ``--end 0`` made SUMO refuse six of them), times written as
+``15:0:0``, and junctions of type ``unregulated`` (no right-of-way matrix:
+sumolib's ``areFoes`` raised a ``KeyError``)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import sumolib.miscutils
+
+from blendtrack.sumo import RunOptions, SumoRun, resolve_scenario
+from blendtrack.sumo.network import Network
+from blendtrack.sumo.sumocfg import sumo_seconds
+
+GAME = Path(__import__("sumo").SUMO_HOME) / "tools" / "game"
+
+needs_game = pytest.mark.skipif(not GAME.is_dir(), reason="the eclipse-sumo wheel has no tools/game")
+
+
+@pytest.mark.parametrize("text", ["54000", "12.5", "15:0:0", "15:00:00", "1:00:00:30", "0:0:1.5"])
+def test_times_are_read_as_sumo_reads_them(text: str) -> None:
+    assert sumo_seconds(text) == sumolib.miscutils.parseTime(text)
+
+
+@pytest.mark.parametrize("text", ["", "1:30", "x", "1:2:3:4:5"])
+def test_a_time_sumo_would_not_read_is_refused(text: str) -> None:
+    with pytest.raises(ValueError):
+        sumo_seconds(text)
+
+
+@needs_game
+def test_a_begin_written_as_hours_is_the_scenarios_begin() -> None:
+    sc = resolve_scenario(GAME / "fokr_bs_demo.sumocfg")  # begin 15:0:0, end 16:0:0
+    assert (sc.begin_s, sc.end_s) == (15 * 3600.0, 16 * 3600.0)
+
+
+@needs_game
+@pytest.mark.parametrize("name", ["corridor", "cross"])
+def test_scenarios_with_dumps_and_open_ended_flows_pass_the_load_check(
+    name: str, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """corridor has flows that begin after 0 s with no end, cross an
+    ``<edgeData>`` dump with none: both take the run's end, and SUMO refused
+    both when the check ran with ``--end 0``; it now runs the run's window."""
+    monkeypatch.setenv("BLENDTRACK_CACHE_DIR", str(tmp_path / "cache"))
+    run = SumoRun(resolve_scenario(GAME / f"{name}.sumocfg"), RunOptions(end_s=60, progress=False), None)
+    run.conn.check_loads()
+    assert list((tmp_path / "cache" / "sumo-loads-ok").iterdir()), "the load was noted"
+
+
+@needs_game
+def test_unregulated_junctions_have_no_foes() -> None:
+    """An unregulated junction has no ``<request>``s: no link of it has a
+    foe or a prohibitor (SUMO's drivers do not wait there); a priority
+    junction of the same network still has them."""
+    network = Network(GAME / "grid6" / "grid6.net.xml")
+    net = network.net()
+    kinds: dict[str, list[str]] = {"unregulated": [], "traffic_light": []}
+    for node in net.getNodes():
+        if node.getType() in kinds:
+            kinds[node.getType()] += [c.getViaLaneID() for c in node.getConnections() if c.getViaLaneID()]
+    assert kinds["unregulated"] and kinds["traffic_light"]
+    for via in kinds["unregulated"]:
+        assert network.internal_foes(via) == [] and network.prohibitors(via) == []
+    assert any(network.internal_foes(via) for via in kinds["traffic_light"])
+
+
+@needs_game
+def test_every_vehicle_controlled_through_unregulated_junctions(tmp_path: Path) -> None:
+    """SUMO's grid6 (lights, priority and unregulated junctions) with every
+    vehicle controlled: it runs, and no vehicle collides or is teleported."""
+    run = SumoRun(resolve_scenario(GAME / "grid6.sumocfg"), RunOptions(controlled_fraction=1.0, end_s=90, progress=False), tmp_path)
+    summary = run.run().summary
+    assert summary["controlled_vehicles"] > 50
+    assert (summary["collisions"], summary["teleports"], summary["placement_faults"]) == (0, 0, 0)
