@@ -78,3 +78,14 @@ def test_every_vehicle_controlled_through_unregulated_junctions(tmp_path: Path) 
     summary = run.run().summary
     assert summary["controlled_vehicles"] > 50
     assert (summary["collisions"], summary["teleports"], summary["placement_faults"]) == (0, 0, 0)
+
+
+@needs_game
+def test_a_run_of_a_scenario_that_begins_hours_in(tmp_path: Path) -> None:
+    """fokr_bs_demo (Braunschweig: cars, bicycles and pedestrians at a 0.05 s
+    step) begins at 15:0:0; a run to 15:00:30 simulates 30 s from there."""
+    run = SumoRun(resolve_scenario(GAME / "fokr_bs_demo.sumocfg"),
+                  RunOptions(controlled_fraction=0.3, end_s=15 * 3600.0 + 30, progress=False), tmp_path)
+    summary = run.run().summary
+    assert (summary["begin_s"], summary["end_s"]) == (15 * 3600.0, 15 * 3600.0 + 30)
+    assert summary["steps"] == 600

@@ -179,6 +179,8 @@ class SumoRun:
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
         #: Moves by kind (see RouteFleet): speed only, nothing to send,
         #: (lane, position), (x, y, angle).
+        #: SUMO's time when the run started (the scenario's begin).
+        self.begin_s = 0.0
         self.moves = {"speed": 0, "none": 0, "lane": 0, "xy": 0, "xy_on_track": 0}
         #: (time, vehicle, traffic light, link index, stop line arc length) of each red-light crossing.
         self.violations: list[tuple[Any, ...]] = []
@@ -268,6 +270,7 @@ class SumoRun:
             "backend": self.conn.backend,
             "backend_note": self.conn.backend_note,
             "seed": self.opt.seed,
+            "begin_s": self.begin_s,
             "end_s": t_end,
             "steps": steps,
             "step_length_s": self.conn.dt,
@@ -323,7 +326,8 @@ class SumoRun:
         sumo = self.conn.sumo
         bar = None
         # (A scenario's begin can be hours in: Braunschweig's 15:0:0 in SUMO's tools/game.)
-        last_t = float(int(float(sumo.simulation.getTime())))
+        self.begin_s = float(sumo.simulation.getTime())
+        last_t = float(int(self.begin_s))
         if self.opt.progress and end is not None:
             from tqdm import tqdm
 
