@@ -600,7 +600,7 @@ def _sumo(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
     [
         (["--end", "10", "--sumo-args", "--end 5"], "given twice"),
         (["--sumo-args", "--seed 3"], "--seed"),
-        (["--sumo-args", "--end soon"], "not a number"),
+        (["--sumo-args", "--end soon"], "not a time"),
         (["--controlled-ids", "nosuch,other"], "none of the controlled ids"),
         (["--seed", "-1"], "seed must be in [0, 2**64)"),
         (["--end", "nan"], "end time must be finite"),
