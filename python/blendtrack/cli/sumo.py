@@ -89,7 +89,7 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
     s = result.summary
     mean_e = result.totals.sum_abs_e / max(result.totals.steps, 1)
     print(
-        f"{out}: {scenario.name}, {s['end_s'] - s.get('begin_s', 0.0):.0f} s simulated in {s['wall_time_s']:.1f} s; "
+        f"{out}: {scenario.name}, {s['end_s'] - s['begin_s']:.0f} s simulated in {s['wall_time_s']:.1f} s; "
         f"{s['controlled_vehicles']} controlled, {s['background_vehicles']} background vehicles; "
         f"mean |e| {mean_e:.3f} m; collisions {s['collisions']} (with any vehicle: {s.get('collisions_all', 0)}), teleports {s['teleports']}, "
         f"red-light violations {s['red_light_violations']} (by SUMO's signal state: {s.get('red_light_crossings_sumo', 0)}), "

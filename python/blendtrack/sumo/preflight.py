@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 from blendtrack.sumo.scenario import Scenario, ScenarioError
 from blendtrack.sumo.selection import CONTROLLED_PARAM
-from blendtrack.sumo.sumocfg import iter_xml, sumo_seconds, take_option
+from blendtrack.sumo.sumocfg import iter_xml, sumo_seconds
 
 if TYPE_CHECKING:
     from blendtrack.sumo.runner import RunOptions
@@ -133,19 +133,40 @@ def check_controlled_ids(scenario: Scenario, options: RunOptions) -> None:
         )
 
 
+def _take_option(args: list[str], names: tuple[str, ...]) -> tuple[list[str], str | None]:
+    """``args`` without the option ``names`` (``--end 5`` or ``--end=5``), and its value."""
+    kept: list[str] = []
+    value: str | None = None
+    i = 0
+    while i < len(args):
+        a = args[i]
+        name, eq, inline = a.partition("=")
+        if a.startswith("-") and name.lstrip("-") in names and (name.startswith("--") or len(name) == 2):
+            if eq:
+                value = inline
+                i += 1
+            else:
+                value = args[i + 1] if i + 1 < len(args) else ""
+                i += 2
+            continue
+        kept.append(a)
+        i += 1
+    return kept, value
+
+
 def reconcile_sumo_args(options: RunOptions) -> RunOptions:
     """``options`` with an ``--end`` of ``sumo_args`` moved to ``end_s``;
     raises :class:`ScenarioError` for a conflicting end or a ``--seed`` there."""
     args = list(options.sumo_args)
     if not args:
         return options
-    _, seed = take_option(args, ("seed",))
+    _, seed = _take_option(args, ("seed",))
     if seed is not None:
         raise ScenarioError(
             f"--sumo-args: give the seed as blendtrack's own seed (--seed N), not to SUMO ({seed!r}): "
             "it also seeds the choice of controlled vehicles"
         )
-    kept, end = take_option(args, ("end", "e"))
+    kept, end = _take_option(args, ("end", "e"))
     if end is None:
         return options
     try:

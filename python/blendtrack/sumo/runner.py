@@ -177,10 +177,10 @@ class SumoRun:
         #: then: moved by lane position, not (x, y), while on it.
         self._by_lane: dict[str, int] = {}
         self.step_hooks: list[Callable[[SumoRun, float], None]] = []
-        #: Moves by kind (see RouteFleet): speed only, nothing to send,
-        #: (lane, position), (x, y, angle).
         #: SUMO's time when the run started (the scenario's begin).
         self.begin_s = 0.0
+        #: Moves by kind (see RouteFleet): speed only, nothing to send,
+        #: (lane, position), (x, y, angle).
         self.moves = {"speed": 0, "none": 0, "lane": 0, "xy": 0, "xy_on_track": 0}
         #: (time, vehicle, traffic light, link index, stop line arc length) of each red-light crossing.
         self.violations: list[tuple[Any, ...]] = []

@@ -60,8 +60,6 @@ class Scenario:
     meta: dict[str, Any] = field(default_factory=dict)
     step_length_s: float = 1.0
     end_s: float | None = None
-    #: The configuration's ``begin`` (s; SUMO's default 0).
-    begin_s: float = 0.0
     additional_files: list[Path] = field(default_factory=list)
 
     def config(self) -> SumoConfig:
@@ -162,13 +160,11 @@ def resolve_scenario(spec: str | Path) -> Scenario:
     route_files = cfg.files("route-files")
     additional_files = cfg.files("additional-files")
     step = cfg.option("step-length")
-    times: dict[str, float | None] = {}
-    for name in ("begin", "end"):
-        value = cfg.option(name)
-        try:
-            times[name] = sumo_seconds(value) if value else None
-        except ValueError:
-            raise ScenarioError(f"{sumocfg}: {name} {value!r} is not a time (seconds, H:M:S or D:H:M:S)") from None
+    end = cfg.option("end")
+    try:
+        end_s = sumo_seconds(end) if end else None
+    except ValueError:
+        raise ScenarioError(f"{sumocfg}: end {end!r} is not a time (seconds, H:M:S or D:H:M:S)") from None
     try:
         step_length = float(step) if step else 1.0
     except ValueError:
@@ -184,6 +180,5 @@ def resolve_scenario(spec: str | Path) -> Scenario:
         additional_files=additional_files,
         meta=meta,
         step_length_s=step_length,
-        end_s=times["end"],
-        begin_s=times["begin"] or 0.0,
+        end_s=end_s,
     )

@@ -140,27 +140,6 @@ def sumo_seconds(text: str) -> float:
     return seconds
 
 
-def take_option(args: list[str], names: tuple[str, ...]) -> tuple[list[str], str | None]:
-    """``args`` without the option ``names`` (``--end 5`` or ``--end=5``), and its value."""
-    kept: list[str] = []
-    value: str | None = None
-    i = 0
-    while i < len(args):
-        a = args[i]
-        name, eq, inline = a.partition("=")
-        if a.startswith("-") and name.lstrip("-") in names and (name.startswith("--") or len(name) == 2):
-            if eq:
-                value = inline
-                i += 1
-            else:
-                value = args[i + 1] if i + 1 < len(args) else ""
-                i += 2
-            continue
-        kept.append(a)
-        i += 1
-    return kept, value
-
-
 def _split(value: str) -> list[str]:
     return [x for x in value.replace(",", " ").split() if x]
 
