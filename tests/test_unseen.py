@@ -14,6 +14,9 @@ import pytest
 import sumolib.miscutils
 
 from blendtrack.sumo import RunOptions, SumoRun, resolve_scenario
+from blendtrack.sumo.compare import CompareOptions, selector
+from blendtrack.sumo.preflight import check_selection
+from blendtrack.sumo.scenario import ScenarioError
 from blendtrack.sumo.network import Network
 from blendtrack.sumo.sumocfg import sumo_seconds
 
@@ -89,3 +92,35 @@ def test_a_run_of_a_scenario_that_begins_hours_in(tmp_path: Path) -> None:
     summary = run.run().summary
     assert (summary["begin_s"], summary["end_s"]) == (15 * 3600.0, 15 * 3600.0 + 30)
     assert summary["steps"] == 600
+
+
+@needs_game
+def test_rail_vehicles_are_left_to_sumo_and_counted(tmp_path: Path) -> None:
+    """rail_demo's three trains (vClass rail, routes repeated 1000 times):
+    selected by the fraction, none is taken over (a train has no steering;
+    driven, each was handed back with a placement fault within 105 s), all
+    three are counted as such, and the trains keep SUMO's own schedule."""
+    run = SumoRun(resolve_scenario(GAME / "rail_demo.sumocfg"), RunOptions(controlled_fraction=1.0, end_s=20, progress=False), tmp_path)
+    summary = run.run().summary
+    assert (summary["controlled_vehicles"], summary["rail_bound_not_controlled"]) == (0, 3)
+    assert summary["background_vehicles"] == 3
+    assert summary["placement_faults"] == 0
+
+
+@needs_game
+def test_a_selection_of_rail_vehicles_only_is_refused_up_front() -> None:
+    sc = resolve_scenario(GAME / "rail_demo.sumocfg")
+    with pytest.raises(ScenarioError, match=r"runs on rails \(freightTrain \(rail\)\)"):
+        check_selection(sc, RunOptions(controlled_type="freightTrain"))
+    assert sc.vtypes().vclass("passengerTrain") == "rail"
+    assert sc.vtypes().vclass("DEFAULT_PEDTYPE") == "pedestrian"
+
+
+@needs_game
+def test_compare_counts_no_train_among_the_controlled() -> None:
+    """compare's plain twin run picks the same vehicles as the treatment: no train."""
+    sc = resolve_scenario(GAME / "rail_demo.sumocfg")
+    pick = selector(CompareOptions(controlled_fraction=1.0), sc, 0)
+    assert not pick("freight_0", "freightTrain")
+    assert not pick("x", "DEFAULT_RAILTYPE")
+    assert pick("car", "DEFAULT_VEHTYPE")

@@ -88,9 +88,12 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         signal.signal(signal.SIGTERM, previous)
     s = result.summary
     mean_e = result.totals.sum_abs_e / max(result.totals.steps, 1)
+    n_rail = s.get("rail_bound_not_controlled", 0)
+    rail = f" ({n_rail} of them selected but on rails, left to SUMO)" if n_rail else ""
     print(
         f"{out}: {scenario.name}, {s['end_s'] - s['begin_s']:.0f} s simulated in {s['wall_time_s']:.1f} s; "
-        f"{s['controlled_vehicles']} controlled, {s['background_vehicles']} background vehicles; "
+        f"{s['controlled_vehicles']} controlled, {s['background_vehicles']} background vehicles"
+        f"{rail}; "
         f"mean |e| {mean_e:.3f} m; collisions {s['collisions']} (with any vehicle: {s.get('collisions_all', 0)}), teleports {s['teleports']}, "
         f"red-light violations {s['red_light_violations']} (by SUMO's signal state: {s.get('red_light_crossings_sumo', 0)}), "
         f"emergency brakings {s.get('emergency_brakings', 0)}"

@@ -26,8 +26,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from blendtrack.sumo.scenario import Scenario, ScenarioError
-from blendtrack.sumo.selection import CONTROLLED_PARAM
+from blendtrack.sumo.scenario import Scenario, ScenarioError, VTypes
+from blendtrack.sumo.selection import CONTROLLED_PARAM, RAIL_BOUND
 from blendtrack.sumo.sumocfg import iter_xml, sumo_seconds
 
 if TYPE_CHECKING:
@@ -89,6 +89,7 @@ def check_selection(scenario: Scenario, options: RunOptions) -> None:
                 f"--controlled-type {o.controlled_type!r}: no vehicle of {scenario.name} is of that type "
                 f"(its vehicles' types: {', '.join(sorted(used)) or 'none'})"
             )
+        _not_all_rail_bound(vtypes, used & set(members), f"--controlled-type {o.controlled_type!r}")
         return
     marked = {t for t, params in vtypes.types.items() if params.get(CONTROLLED_PARAM, "").strip().lower() in ("1", "true", "yes")}
     if not marked & used:
@@ -96,6 +97,20 @@ def check_selection(scenario: Scenario, options: RunOptions) -> None:
             f"{scenario.name}: nothing selects a vehicle to control: no vType of its vehicles carries "
             f"<param key=\"{CONTROLLED_PARAM}\" value=\"true\"/>; choose with --controlled-fraction P, "
             f"--controlled-type T or --controlled-ids (its vehicles' types: {', '.join(sorted(used)) or 'none'})"
+        )
+    _not_all_rail_bound(vtypes, marked & used, f"{scenario.name}: {CONTROLLED_PARAM}")
+
+
+def _not_all_rail_bound(vtypes: VTypes, types: set[str], what: str) -> None:
+    """Raises :class:`ScenarioError` when every one of ``types`` (the
+    selected vTypes that have vehicles) runs on rails: the run would control
+    nothing (``selection.RAIL_BOUND``)."""
+    if types and all(vtypes.vclass(t) in RAIL_BOUND for t in types):
+        classes = ", ".join(f"{t} ({vtypes.vclass(t)})" for t in sorted(types))
+        raise ScenarioError(
+            f"{what}: every vehicle it selects runs on rails ({classes}): blendtrack steers road "
+            f"vehicles along their lanes, and a rail vehicle has no steering to command; it stays SUMO's. "
+            f"Select road vehicles instead"
         )
 
 

@@ -278,6 +278,8 @@ class SumoRun:
             "ballistic_update": self.fleet.ballistic,
             "controlled_vehicles": totals.vehicles,
             "background_vehicles": self._background,
+            "rail_bound_not_controlled": self.selection.rail_bound_skipped,
+            "takeover_failures": self.counts["takeover_failures"],
             "collisions": counts["collision_events"],
             "collisions_remote_checked": len(self.remote_found),
             "controlled_vehicles_in_collisions": totals.collisions,

@@ -28,6 +28,11 @@ __all__ = ["SCENARIO_ROOT", "Scenario", "ScenarioError", "VTypes", "available_sc
 CONFIG_PATTERNS = ("*.sumocfg", "*.cfg", "*.xml", "*.sumocfg.gz", "*.xml.gz")
 
 
+#: The vehicle classes of SUMO's default vTypes.
+_DEFAULT_CLASSES = {"DEFAULT_RAILTYPE": "rail", "DEFAULT_BIKETYPE": "bicycle", "DEFAULT_TAXITYPE": "taxi",
+                    "DEFAULT_PEDTYPE": "pedestrian", "DEFAULT_CONTAINERTYPE": "ignoring"}
+
+
 @dataclass
 class VTypes:
     """The vTypes a scenario defines (route and additional files), with
@@ -35,6 +40,13 @@ class VTypes:
 
     types: dict[str, dict[str, str]] = field(default_factory=dict)
     distributions: dict[str, list[str]] = field(default_factory=dict)
+    #: vType -> its ``vClass`` attribute, where it has one.
+    classes: dict[str, str] = field(default_factory=dict)
+
+    def vclass(self, name: str) -> str:
+        """The vehicle class of vType ``name``: its ``vClass``, SUMO's for
+        its default types, else SUMO's default (passenger)."""
+        return self.classes.get(name) or _DEFAULT_CLASSES.get(name, "passenger")
 
     def members(self, name: str) -> list[str] | None:
         """The vTypes ``name`` stands for: itself, a distribution's members,
@@ -87,6 +99,8 @@ class Scenario:
                 elif el.get("id"):
                     params = {p.get("key", ""): p.get("value", "") for p in el.findall("param")}
                     out.types[el.get("id", "")] = params
+                    if el.get("vClass"):
+                        out.classes[el.get("id", "")] = el.get("vClass", "")
         self.__dict__["_vtypes"] = out
         return out
 

@@ -16,7 +16,7 @@ from typing import Any
 from blendtrack.sumo.connection import sumo_command
 from blendtrack.sumo.options import RunOptions
 from blendtrack.sumo.scenario import Scenario, ScenarioError
-from blendtrack.sumo.selection import CONTROLLED_PARAM, unit_hash
+from blendtrack.sumo.selection import CONTROLLED_PARAM, RAIL_BOUND, unit_hash
 from blendtrack.sumo.sumocfg import read_xml
 
 #: Car-following models a baseline can use ("krauss" = as the scenario says).
@@ -77,6 +77,16 @@ def with_model(scenario: Scenario, model: str, tmp: Path) -> Scenario:
 
 def selector(opts: CompareOptions, scenario: Scenario, seed: int) -> Callable[[str, str], bool]:
     """The treatment's selection rule (RunOptions / Selection.is_selected) as a function of (id, vType)."""
+    rule = _rule(opts, scenario, seed)
+    vtypes = scenario.vtypes()
+    rail = {t for t in [*vtypes.types, "DEFAULT_RAILTYPE"] if vtypes.vclass(t) in RAIL_BOUND}
+    if not rail:
+        return rule
+    # Never a vehicle on rails (Selection.is_selected).
+    return lambda vid, vtype: vtype not in rail and rule(vid, vtype)
+
+
+def _rule(opts: CompareOptions, scenario: Scenario, seed: int) -> Callable[[str, str], bool]:
     if opts.controlled_fraction is not None:
         frac = opts.controlled_fraction
         return lambda vid, vtype: unit_hash(seed, vid) < frac
