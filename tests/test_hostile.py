@@ -604,6 +604,8 @@ def _sumo(tmp_path: Path, *args: str) -> subprocess.CompletedProcess[str]:
         (["--controlled-ids", "nosuch,other"], "none of the controlled ids"),
         (["--seed", "-1"], "seed must be in [0, 2**64)"),
         (["--end", "nan"], "end time must be finite"),
+        (["--end", "soon"], "end time must be a time (seconds, H:M:S or D:H:M:S), got 'soon'"),
+        (["--end", "0:0:0"], "end time must be > 0"),
     ],
 )
 def test_bad_sumo_runs_are_refused_before_sumo_starts(

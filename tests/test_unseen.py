@@ -94,6 +94,13 @@ def test_a_run_of_a_scenario_that_begins_hours_in(tmp_path: Path) -> None:
     assert summary["steps"] == 600
 
 
+def test_end_on_the_command_line_reads_hours_as_sumo_does() -> None:
+    from blendtrack.cli.common import end_time
+
+    assert end_time("15:05:00") == 15 * 3600.0 + 300
+    assert end_time("300") == 300.0
+
+
 @needs_game
 def test_rail_vehicles_are_left_to_sumo_and_counted(tmp_path: Path) -> None:
     """rail_demo's three trains (vClass rail, routes repeated 1000 times):

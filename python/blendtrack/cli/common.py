@@ -64,6 +64,20 @@ def finite(kind: str, low: float | None = None, strict: bool = False, high: floa
     return bounded(kind, False, low, high, strict)
 
 
+def end_time(text: str) -> float:
+    """argparse type of ``--end``: a time after 0 as SUMO reads one
+    (seconds, ``H:M:S`` or ``D:H:M:S``: a scenario that begins at
+    ``15:0:0`` ends at ``15:05:00``)."""
+    from blendtrack.sumo.sumocfg import sumo_seconds
+
+    try:
+        value = sumo_seconds(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"end time must be a time (seconds, H:M:S or D:H:M:S), got {text!r}") from None
+    checked: float = finite("end time", 0.0, strict=True)(repr(value))
+    return checked
+
+
 def whole(what: str, low: int = 1, high: int | None = None, bounds: str | None = None):  # type: ignore[no-untyped-def]
     """argparse type: a whole number in [low, high]."""
     return bounded(what, True, low, high, bounds=bounds)

@@ -10,7 +10,7 @@ from pathlib import Path as FsPath
 from typing import Any
 
 import blendtrack
-from blendtrack.cli.common import Parser, alpha_value, finite, raise_interrupt, require_file, seed, seeds, sumo_args
+from blendtrack.cli.common import Parser, alpha_value, end_time, finite, raise_interrupt, require_file, seed, seeds, sumo_args
 
 #: ``RunOptions.miss_exit_after_s``'s default, listed here so that parsing
 #: does not load the SUMO bridge (a test holds the two equal).
@@ -247,7 +247,8 @@ def add_compare_parser(subcommands: "argparse._SubParsersAction[Parser]") -> Non
         help="car-following model of every vType in both runs: krauss = as in the scenario (default), or IDM, EIDM, ACC",
     )
     cmp.add_argument("--seeds", type=seeds, default=3, metavar="N", help="run seeds 0..N-1 (default 3)")
-    cmp.add_argument("--end", type=finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
+    cmp.add_argument("--end", type=end_time, metavar="S",
+                     help="simulated end time (s, or H:M:S as SUMO reads times; default: the scenario's)")
     _add_output_options(cmp, "in both runs of every pair")
     cmp.set_defaults(run=_cmd_compare)
 
@@ -286,7 +287,8 @@ def add_sumo_parser(subcommands: "argparse._SubParsersAction[Parser]") -> None:
         ),
     )
     _add_scenario_options(run, ids=True)
-    run.add_argument("--end", type=finite("end time", 0.0, strict=True), metavar="S", help="simulated end time (s; default: the scenario's)")
+    run.add_argument("--end", type=end_time, metavar="S",
+                     help="simulated end time (s, or H:M:S as SUMO reads times; default: the scenario's)")
     run.add_argument("--seed", type=seed, default=0, metavar="N", help="seed of SUMO and of the vehicle selection (default 0)")
     run.add_argument("--gui", action="store_true", help="show the run in sumo-gui (through TraCI)")
     run.add_argument(
