@@ -234,22 +234,25 @@ class _FakeSumo:
 def test_only_pairs_sumos_lane_check_compares_count() -> None:
     """Same lane, or the victim's back hanging onto the collider's lane
     (its front on a lane that lane leads to, directly or by a junction
-    lane): compared. Two lanes that merge further on, a victim wholly on
+    lane, and its back past that junction lane): compared. Two lanes that merge further on, a victim wholly on
     its own lane, a vehicle off the network: not."""
     links = {"a_0": [("c_0", ":j_0_0")], "b_0": [("c_0", ":j_1_0")]}
     cars = {
         "f": ("a_0", 90.0, 5.0), "lead": ("a_0", 95.0, 5.0),
         "in_j": (":j_0_0", 2.0, 5.0),     # back hangs onto a_0
-        "out": ("c_0", 1.0, 5.0),         # back hangs onto the junction lanes before c_0
+        "out": ("c_0", 1.0, 5.0),         # back hangs past the 3 m junction lane onto a_0
+        "out_in_j": ("c_0", 2.0, 5.0),    # back hangs onto the junction lane only
         "other_way": (":j_1_0", 2.0, 5.0),  # from b_0: merges with a_0's way at c_0
         "clear": (":j_0_0", 6.0, 5.0),    # wholly on the junction lane
         "gone": ("", 0.0, 5.0),
     }
     fake = _FakeSumo(cars, links)
-    check = RemoteCollisions(fake, "teleport", -1.0, fake)
+    inside = {("a_0", "c_0"): 3.0, ("b_0", "c_0"): 3.0}
+    check = RemoteCollisions(fake, "teleport", -1.0, fake, None, lambda a, b: inside.get((a, b)))
     assert check._same_way("f", "lead") == "a_0"
     assert check._same_way("f", "in_j") == "a_0"
     assert check._same_way("f", "out") == "a_0"
+    assert check._same_way("f", "out_in_j") is None
     assert check._same_way("f", "other_way") is None
     assert check._same_way("f", "clear") is None
     assert check._same_way("f", "gone") is None and check._same_way("gone", "f") is None

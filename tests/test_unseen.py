@@ -131,3 +131,33 @@ def test_compare_counts_no_train_among_the_controlled() -> None:
     assert not pick("freight_0", "freightTrain")
     assert not pick("x", "DEFAULT_RAILTYPE")
     assert pick("car", "DEFAULT_VEHTYPE")
+
+
+@needs_game
+def test_a_leader_whose_back_hangs_onto_the_way_ahead_is_seen(tmp_path: Path) -> None:
+    """fokr_bs_demo, 15:04:48: SUMO has the controlled car on junction lane
+    :109_0_3, beside its track's :109_0_4 (a fan-out); the way through the
+    junction ends on the 6.6 m lane -2_6, and a car 1.6-2.3 m onto the
+    junction lane after it hangs 2.2-2.9 m back onto -2_6. SUMO's
+    ``getLeader`` of the controlled car says a car 41 m away on the other
+    branch; the way's leader is that car, about 4 m ahead (unseen, it was
+    found 2.5 m ahead when SUMO switched lanes, and the controlled car
+    braked at 4.8 m/s^2, harder than the driver behind it expected)."""
+    car, hanging = "1695567883563492", "1695567883113408"
+    seen: list[tuple[str, object]] = []
+
+    def hook(r: SumoRun, t: float) -> None:
+        if t >= 54287.9 and car in r.active:
+            r.conn.new_step()  # this step's lane lists
+            lane = r.conn.sumo.vehicle.getLaneID(car)
+            lead = r.conn.sumo.vehicle.getLeader(car, 100.0)
+            seen.append((lane, r.junctions.leader_on_track(car, r.active[car].geo.piece_lane, lead, lane)))
+
+    run = SumoRun(resolve_scenario(GAME / "fokr_bs_demo.sumocfg"),
+                  RunOptions(controlled_ids=(car,), end_s=54288.2, progress=False), tmp_path)
+    run.step_hooks.append(hook)
+    run.run()
+    beside = [lead for lane, lead in seen if lane == ":109_0_3"]
+    assert beside, seen
+    for lead in beside:
+        assert isinstance(lead, tuple) and lead[0] == hanging and 3.0 < lead[1] < 5.0, seen

@@ -457,7 +457,25 @@ class Junctions:
                 back = float(veh.getLanePosition(other)) - float(veh.getLength(other))
                 return other, dist + back - float(veh.getMinGap(vid))
             dist += length
-        return None
+        if not way:
+            return None
+        # Past the way's last lane: a vehicle just beyond its end, on any
+        # lane after it, with its back still on it (SUMO counts such a
+        # vehicle on the lane as well, and its getLeader sees it there).
+        # The way ends where its lane parts (a fan-out, or any junction):
+        # a car whose front was 1.6 m onto the next junction lane hung 2.9 m
+        # back onto a 6.6 m lane, unseen by a controlled car on its way
+        # through the junction before, until SUMO put that one on its
+        # track's lane 2.5 m behind it (SUMO's fokr_bs_demo, 30 %, 54288 s).
+        best: tuple[str, float] | None = None
+        for nxt in self.network.lanes_next(way[-1][0]):
+            on = [x for x in self.conn.vehicles_on(nxt) if x != vid]
+            if not on:
+                continue
+            back = float(veh.getLanePosition(on[0])) - float(veh.getLength(on[0]))
+            if back < 0.0 and (best is None or dist + back < best[1]):
+                best = (on[0], dist + back)
+        return None if best is None else (best[0], best[1] - float(veh.getMinGap(vid)))
 
     def leader_at_fanout(self, vid: str, lane: str, track_lanes: list[str], lead: Any) -> Any:
         """``lead`` (``getLeader``'s answer for ``vid``, None for none) or,

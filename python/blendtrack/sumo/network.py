@@ -63,6 +63,8 @@ class Network:
         self._waiting_points: dict[str, tuple[str | None, float]] = {}
         self._foes: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
         self._after: dict[str, list[tuple[str, float]]] = {}
+        self._next: dict[str, tuple[str, ...]] = {}
+        self._through: dict[tuple[str, str], float | None] = {}
         self._prohibitors: dict[str, list[tuple[str, str | None, float, str, int]]] = {}
         self._ways_from: dict[tuple[str, str], frozenset[str]] = {}
         self._stops_inside: dict[str, bool] = {}
@@ -446,6 +448,37 @@ class Network:
                     hit.append((to.getID(), float(to.getLength())))
             self._after[via] = hit
         return hit
+
+    def lanes_next(self, lane: str) -> tuple[str, ...]:
+        """The first lanes after normal lane ``lane``: each of its
+        connections' first junction lane (or the lane it leads to, where
+        it has none); () for a lane the network does not have."""
+        hit = self._next.get(lane)
+        if hit is None:
+            try:
+                out = self.net().getLane(lane).getOutgoing()
+            except (KeyError, ValueError):
+                out = []
+            hit = self._next[lane] = tuple(dict.fromkeys(c.getViaLaneID() or c.getToLane().getID() for c in out))
+        return hit
+
+    def through_length(self, lane: str, to: str) -> float | None:
+        """The length of the junction lanes of normal lane ``lane``'s
+        connection to lane ``to`` (0 for one without junction lanes), or
+        None when ``lane`` has no connection to ``to``."""
+        key = (lane, to)
+        if key not in self._through:
+            found = None
+            try:
+                out = self.net().getLane(lane).getOutgoing()
+            except (KeyError, ValueError):
+                out = []
+            for c in out:
+                if c.getToLane().getID() == to:
+                    found = sum(float(part.getLength()) for part in _via_chain(self.net(), c))
+                    break
+            self._through[key] = found
+        return self._through[key]
 
     def keeps_clear(self, via: str) -> bool:
         """Must the junction be kept clear on the way of ``via`` (the

@@ -215,7 +215,7 @@ class SumoRun:
         self.conn.start()
         self.fleet.ballistic = self._ballistic()
         self.remote_collisions = RemoteCollisions(self.conn.sumo.vehicle, *self._collision_options(), self.conn.sumo.lane,
-                                                  self.network.ways_from)
+                                                  self.network.ways_from, self.network.through_length)
         completed = False
         try:
             end = self.opt.end_s if self.opt.end_s is not None else self.scenario.default_end_s
