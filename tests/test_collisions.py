@@ -162,6 +162,53 @@ def test_a_run_under_teleport_counts_a_collision_sumo_skipped(tmp_path: Path) ->
     assert {r.vid: r.reason for r in result.records}[planted[0][1]] == "collision"
 
 
+def test_a_controlled_collider_sumo_teleports_counts_as_a_collision(tmp_path: Path) -> None:
+    """Under teleport SUMO teleports the collider in the step of the
+    collision, and lists it among both the step's teleports and its
+    colliding vehicles. One of SUMO's drivers is put with its back 1 m
+    behind the front of a controlled vehicle SUMO checks (no (x, y) move
+    within the window), standing: SUMO reports the controlled vehicle as
+    the collider and teleports it. The run counts the collision and ends
+    the vehicle's record with it (dropped for the teleport first, its
+    collision was not counted: 0 in the summary and the CLI's line, 1 in
+    SUMO's output; Bologna with the sublane model, 573 s)."""
+    planted: list[tuple[str, str]] = []
+
+    def plant(run: SumoRun, t: float) -> None:
+        if planted or t < 30.0:
+            return
+        veh = run.sumo.vehicle
+        for vid in list(run.active):
+            if vid in run.remote_collisions._moved:
+                continue
+            lane = veh.getLaneID(vid)
+            front = veh.getLanePosition(vid)
+            if lane.startswith(":") or front < 20.0 or front > veh.getLength(vid) + run.network.lane_length(lane) - 30.0:
+                continue
+            for other in veh.getIDList():
+                if other in run.active or veh.getLaneID(other).startswith(":"):
+                    continue
+                try:
+                    veh.moveTo(other, lane, front + veh.getLength(other) - 1.0)
+                except Exception:
+                    continue  # the lane is not on its route
+                veh.setSpeed(other, 0.0)
+                planted.append((vid, other))
+                return
+
+    run = SumoRun(resolve_scenario("urban_grid"),
+                  RunOptions(controlled_fraction=0.5, end_s=45.0, seed=0, progress=False, keep_records=True, sumo_args=("--collision.action", "teleport")),
+                  tmp_path)
+    run.step_hooks.append(plant)
+    result = run.run()
+    assert planted, "no controlled vehicle on a normal lane to plant a standing driver on"
+    car = planted[0][0]
+    xml = (tmp_path / "sumo" / "collisions.xml").read_text()
+    assert f'collider="{car}"' in xml, xml
+    assert {r.vid: r.reason for r in result.records}[car] == "collision"
+    assert result.summary["collisions"] >= 1
+
+
 def test_collisions_csv_holds_sumos_and_the_checks_in_time_order(tmp_path: Path) -> None:
     from blendtrack.sumo import _count_collisions
     from blendtrack.sumo.records import RunResult

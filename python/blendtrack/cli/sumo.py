@@ -94,7 +94,8 @@ def _cmd_sumo_run(args: argparse.Namespace) -> int:
         f"{out}: {scenario.name}, {s['end_s'] - s['begin_s']:.0f} s simulated in {s['wall_time_s']:.1f} s; "
         f"{s['controlled_vehicles']} controlled, {s['background_vehicles']} background vehicles"
         f"{rail}; "
-        f"mean |e| {mean_e:.3f} m; collisions {s['collisions']} (with any vehicle: {s.get('collisions_all', 0)}), teleports {s['teleports']}, "
+        f"mean |e| {mean_e:.3f} m; collisions with a controlled vehicle {s.get('collisions_with_controlled', s['collisions'])} "
+        f"(of any vehicles: {s.get('collisions_all', 0)}), teleports {s['teleports']}, "
         f"red-light violations {s['red_light_violations']} (by SUMO's signal state: {s.get('red_light_crossings_sumo', 0)}), "
         f"emergency brakings {s.get('emergency_brakings', 0)}"
     )

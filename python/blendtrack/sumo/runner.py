@@ -370,12 +370,18 @@ class SumoRun:
             self._seen.discard(vid)
             self.sumo_leaders.forget(vid)
         teleporting = ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ())
+        colliding = list(ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ()))
         self.incidents.teleports(teleporting, self.active)
+        # Under collision.action teleport SUMO teleports the collider in the
+        # step of the collision: it is dropped for the collision below, not
+        # for a teleport (dropped first, it was no longer controlled when the
+        # collision was counted: a collision with a controlled vehicle in
+        # SUMO's own output, 0 in the summary and the CLI's line).
+        in_collision = set(colliding)
         for vid in teleporting:
             remote.forget(vid)
-            if vid in self.active:
+            if vid in self.active and vid not in in_collision:
                 self._drop(vid, t, "teleport")
-        colliding = list(ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ()))
         reported: set[tuple[str, str]] = set()
         if colliding:
             # Events, not vehicles: one collision of two controlled
