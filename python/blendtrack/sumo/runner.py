@@ -62,6 +62,7 @@ import numpy as np
 import blendtrack
 from blendtrack import RouteFleet
 from blendtrack.sumo.collisions import RemoteCollisions
+from blendtrack.sumo.sublane import SublaneLeaders
 from blendtrack.sumo.connection import SumoConnection, loads_ok_marker, sumo_binary
 from blendtrack.sumo.faults import ROUTE_INDEX_SLACK_M, PlacementCheck, repair
 from blendtrack.sumo.geometry import segments_distance
@@ -159,6 +160,7 @@ class SumoRun:
         #: up once SUMO runs), and those found: (time, collider, victim, lane,
         #: collider's vType, victim's vType).
         self.remote_collisions = RemoteCollisions(None, "", -1.0)
+        self.sublane = SublaneLeaders(None, 0.0)
         self.remote_found: list[tuple[float, str, str, str, str, str]] = []
         self._seen: set[str] = set()
         #: Vehicles left to SUMO (not selected, or not drivable).
@@ -216,6 +218,7 @@ class SumoRun:
         self.fleet.ballistic = self._ballistic()
         self.remote_collisions = RemoteCollisions(self.conn.sumo.vehicle, *self._collision_options(), self.conn.sumo.lane,
                                                   self.network.ways_from, self.network.through_length)
+        self.sublane = SublaneLeaders(self.conn.sumo.vehicle, self._lateral_resolution())
         completed = False
         try:
             end = self.opt.end_s if self.opt.end_s is not None else self.scenario.default_end_s
@@ -253,6 +256,13 @@ class SumoRun:
             return str(self.conn.sumo.simulation.getOption("step-method.ballistic")).lower() == "true"
         except Exception:
             return False  # an older SUMO without getOption: its default
+
+    def _lateral_resolution(self) -> float:
+        """SUMO's ``lateral-resolution`` (> 0: the sublane model; -1 if not to be read)."""
+        try:
+            return float(self.conn.sumo.simulation.getOption("lateral-resolution"))
+        except Exception:
+            return -1.0  # an older SUMO without getOption
 
     def _collision_options(self) -> tuple[str, float]:
         """SUMO's ``collision.action`` and ``collision.mingap-factor`` ("" and -1 if not to be read)."""
@@ -369,6 +379,7 @@ class SumoRun:
             self._drop(vid, t, "arrived")
             self._seen.discard(vid)
             self.sumo_leaders.forget(vid)
+            self.sublane.forget(vid)
         teleporting = ev.get(tc.VAR_TELEPORT_STARTING_VEHICLES_IDS, ())
         colliding = list(ev.get(tc.VAR_COLLIDING_VEHICLES_IDS, ()))
         self.incidents.teleports(teleporting, self.active)
@@ -560,7 +571,9 @@ class SumoRun:
         vehicle SUMO drives, place not known): one call per such lane instead
         of one per vehicle."""
         fleet, ids = self.fleet, self.vehicles.ids
-        lanes = fleet.lanes_with_followers(self.vehicles.slots).tolist()
+        # Under the sublane model every vehicle is asked (a driver beside
+        # can reach in between two controlled vehicles following each other).
+        lanes = [] if self.sublane.active else fleet.lanes_with_followers(self.vehicles.slots).tolist()
         names = self.tracks.lanes.names
         ask = fleet.leaders_on_lanes(self.vehicles.slots, lanes, self.conn.vehicles_on_lanes([names[lane] for lane in lanes])).tolist()
         asked = list(map(ids.__getitem__, ask))
@@ -601,6 +614,10 @@ class SumoRun:
             leaders[k] = lead
         if displaced:
             self.lanes.add_merge_leads(displaced)
+        if self.sublane.active:
+            self.sublane.new_step()
+            nearest = self.sublane.nearest
+            leaders = [nearest(vid, lead) for vid, lead in zip(asked, leaders)]
         return ask, self.sumo_leaders.correct(leaders)
 
     # ------------------------------------------------------------------ apply
