@@ -120,6 +120,34 @@ def test_a_pair_sumo_reported_is_not_counted_again(tmp_path: Path, build_net: An
         assert check.check(traci.simulation.getTime(), {(follower, leader)}) == []
 
 
+def _plant_driver(run: SumoRun, lane: str, pos: float, speed: float, skip: Any) -> str | None:
+    """Puts one of SUMO's drivers (not controlled, not in ``skip``, not
+    inside a junction) on ``lane`` at ``pos`` with ``speed`` (``moveTo``,
+    which is not remote control); its id, or None when no driver's route
+    has that lane."""
+    veh = run.sumo.vehicle
+    for other in veh.getIDList():
+        if other in run.active or other in skip or veh.getLaneID(other).startswith(":"):
+            continue
+        try:
+            veh.moveTo(other, lane, pos)
+        except Exception:
+            continue  # the lane is not on its route
+        veh.setSpeed(other, speed)
+        return other
+    return None
+
+
+def _grid_under_teleport(tmp_path: Path, end_s: float, hook: Any) -> tuple[SumoRun, Any]:
+    """The shipped grid, half its vehicles controlled, under teleport, with ``hook`` after each step."""
+    run = SumoRun(resolve_scenario("urban_grid"),
+                  RunOptions(controlled_fraction=0.5, end_s=end_s, seed=0, progress=False, keep_records=True,
+                             sumo_args=("--collision.action", "teleport")),
+                  tmp_path)
+    run.step_hooks.append(hook)
+    return run, run.run()
+
+
 def test_a_run_under_teleport_counts_a_collision_sumo_skipped(tmp_path: Path) -> None:
     """End to end on the shipped grid under teleport: right after a
     controlled vehicle's (x, y) move, one of SUMO's drivers is put 1 m
@@ -137,22 +165,12 @@ def test_a_run_under_teleport_counts_a_collision_sumo_skipped(tmp_path: Path) ->
             back = veh.getLanePosition(vid) - veh.getLength(vid)
             if lane.startswith(":") or back < 12.0:
                 continue
-            for other in veh.getIDList():
-                if other in run.active or other in run.remote_collisions._moved or veh.getLaneID(other).startswith(":"):
-                    continue
-                try:
-                    veh.moveTo(other, lane, back - 1.0)
-                except Exception:
-                    continue  # the lane is not on its route
-                veh.setSpeed(other, veh.getSpeed(vid))
+            other = _plant_driver(run, lane, back - 1.0, veh.getSpeed(vid), run.remote_collisions._moved)
+            if other is not None:
                 planted.append((other, vid))
                 return
 
-    run = SumoRun(resolve_scenario("urban_grid"),
-                  RunOptions(controlled_fraction=0.5, end_s=60.0, seed=0, progress=False, keep_records=True, sumo_args=("--collision.action", "teleport")),
-                  tmp_path)
-    run.step_hooks.append(plant)
-    result = run.run()
+    run, result = _grid_under_teleport(tmp_path, 60.0, plant)
     assert planted, "no controlled vehicle moved by (x, y) on a normal lane to plant a driver behind"
     found = [(c, v) for _, c, v, *_ in run.remote_found]
     assert planted[0] in found
@@ -185,22 +203,13 @@ def test_a_controlled_collider_sumo_teleports_counts_as_a_collision(tmp_path: Pa
             front = veh.getLanePosition(vid)
             if lane.startswith(":") or front < 20.0 or front > veh.getLength(vid) + run.network.lane_length(lane) - 30.0:
                 continue
-            for other in veh.getIDList():
-                if other in run.active or veh.getLaneID(other).startswith(":"):
-                    continue
-                try:
-                    veh.moveTo(other, lane, front + veh.getLength(other) - 1.0)
-                except Exception:
-                    continue  # the lane is not on its route
-                veh.setSpeed(other, 0.0)
+            # (4.5 or 5 m long: the planted back 0.5-1 m behind the front.)
+            other = _plant_driver(run, lane, front + 4.0, 0.0, ())
+            if other is not None:
                 planted.append((vid, other))
                 return
 
-    run = SumoRun(resolve_scenario("urban_grid"),
-                  RunOptions(controlled_fraction=0.5, end_s=45.0, seed=0, progress=False, keep_records=True, sumo_args=("--collision.action", "teleport")),
-                  tmp_path)
-    run.step_hooks.append(plant)
-    result = run.run()
+    run, result = _grid_under_teleport(tmp_path, 45.0, plant)
     assert planted, "no controlled vehicle on a normal lane to plant a standing driver on"
     car = planted[0][0]
     xml = (tmp_path / "sumo" / "collisions.xml").read_text()
