@@ -23,11 +23,13 @@ emergency brakings and missed exits. Writes OUT/study.md (the table),
 OUT/per_seed.csv and OUT/study.png (the figures seed by seed), and prints
 the table. A study measures; it asserts nothing. Runs already finished under
 OUT are reused (delete OUT to start again); a run that fails is reported and
-its seed left out, and the study then exits 1.
+its seed left out, and the study then exits 1. `--sumo-args` gives SUMO
+options to both runs of each seed, plain and blendtrack (e.g. SUMO's sublane
+model, `--sumo-args "--lateral-resolution 0.8"`).
 
     .venv/bin/python scripts/study_real_scenarios.py [--seeds 3] [--first 0] [--end 600] \\
         [--fraction 0.3] [--jobs 2] [--scenario NAME_OR_CFG ...] [--out out/study_real] \\
-        [-- further options of blendtrack sumo run, e.g. --corridor lane]
+        [--sumo-args 'SUMO OPTIONS'] [-- further options of blendtrack sumo run, e.g. --corridor lane]
 """
 
 from __future__ import annotations
@@ -206,14 +208,16 @@ def _run(kind: str, scen: Path | str, seed: int, out: Path, args: argparse.Names
     if kind == "baseline":
         code = ("import sys\nfrom pathlib import Path\nfrom blendtrack.sumo import resolve_scenario\n"
                 "from blendtrack.sumo.compare.runs import run_baseline\n"
-                "run_baseline(resolve_scenario(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), Path(sys.argv[4]), devices=False)\n")
-        cmd = [sys.executable, "-c", code, str(scen), str(seed), str(args.end), str(out)]
+                "import shlex\n"
+                "run_baseline(resolve_scenario(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3]), Path(sys.argv[4]),\n"
+                "             sumo_args=shlex.split(sys.argv[5]), devices=False)\n")
+        cmd = [sys.executable, "-c", code, str(scen), str(seed), str(args.end), str(out), args.sumo_args]
     else:
         from blendtrack.sumo.compare.runs import output_args
 
         cmd = [sys.executable, "-m", "blendtrack.cli", "sumo", "run", str(scen), "--controlled-fraction", str(args.fraction),
                "--end", str(args.end), "--seed", str(seed), "--quiet", "--out", str(out),
-               "--sumo-args", shlex.join(output_args(out / "sumo")), *args.extra]
+               "--sumo-args", shlex.join([*output_args(out / "sumo"), *shlex.split(args.sumo_args)]), *args.extra]
     proc = subprocess.run(cmd, capture_output=True, text=True)
     if proc.returncode != 0:
         lines = [ln for ln in (proc.stderr + proc.stdout).splitlines() if ln.strip()]
@@ -232,12 +236,19 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--scenario", action="append", default=None,
                    help="a public scenario's name, a shipped one's, or a SUMO configuration (repeatable; default: the two public ones)")
     p.add_argument("--out", type=Path, default=ROOT / "out" / "study_real")
+    p.add_argument("--sumo-args", default="", metavar="'OPTS'",
+                   help="SUMO options for both runs of each seed, plain and blendtrack (e.g. '--lateral-resolution 0.8'); "
+                        "runs already under --out are reused whatever they were run with")
     p.add_argument("extra", nargs="*", help="further options for blendtrack sumo run (after --)")
     args = p.parse_args(argv)
     if args.seeds < 1 or args.first < 0 or args.jobs < 1 or not args.end > 0 or not 0.0 < args.fraction <= 1.0:
         p.error("--seeds and --jobs must be at least 1, --first at least 0, --end above 0, --fraction in (0, 1]")
     if any(a == "--sumo-args" or a.startswith("--sumo-args=") for a in args.extra):
-        p.error("--sumo-args is the study's own (the outputs it reads); give SUMO options in the scenario instead")
+        p.error("give SUMO options as the study's own --sumo-args (before --): both runs of a seed need them")
+    try:
+        shlex.split(args.sumo_args)
+    except ValueError as e:
+        p.error(f"--sumo-args {args.sumo_args!r}: {e}")
     scenarios = dict(_resolve(n) for n in (args.scenario or list(DEFAULT_SCENARIOS)))
     from blendtrack.sumo import resolve_scenario
     from blendtrack.sumo.sumocfg import ScenarioError
@@ -275,7 +286,8 @@ def main(argv: list[str] | None = None) -> int:
             rows.append({"scenario": name, "seed": seed, **figs})
         pooled[name] = pool(per_seed)
     text = (f"{args.fraction:.0%} of the vehicles controlled, {args.end:g} s at each scenario's own step length, "
-            f"pooled over the seeds; `blendtrack sumo run` options: {shlex.join(args.extra) or 'the defaults'}.\n\n"
+            f"pooled over the seeds; `blendtrack sumo run` options: {shlex.join(args.extra) or 'the defaults'}"
+            f"{f'; SUMO options for both runs: `{args.sumo_args}`' if args.sumo_args.strip() else ''}.\n\n"
             + table(pooled))
     for (name, seed), why in sorted(failed.items()):
         text += f"\n{name} seed {seed} left out: {why}\n"

@@ -139,3 +139,27 @@ def test_study_runs_a_shipped_scenario_and_reuses_finished_runs(tmp_path):
     before = summary.stat().st_mtime_ns
     assert s.main(argv) == 0
     assert summary.stat().st_mtime_ns == before
+
+
+def test_study_gives_its_sumo_args_to_both_runs(tmp_path, monkeypatch):
+    """--sumo-args (e.g. the sublane model) reaches the plain run and the
+    blendtrack run of a seed alike (the plain run's code reads it as its
+    last argument); given after -- it is refused (only one run would get it)."""
+    import argparse
+    import shlex
+    import subprocess
+
+    s = _script("study_real_scenarios")
+    seen = []
+
+    def fake(cmd, **kw):
+        seen.append(cmd)
+        return subprocess.CompletedProcess(cmd, 0, "", "")
+
+    monkeypatch.setattr(s.subprocess, "run", fake)
+    args = argparse.Namespace(end=30.0, fraction=0.3, extra=[], sumo_args="--lateral-resolution 0.8")
+    for kind in ("baseline", "treatment"):
+        assert s._run(kind, "ring_single_lane", 0, tmp_path / kind, args) == (True, "")
+    base, treat = seen
+    assert "sumo_args=shlex.split(sys.argv[5])" in base[2] and shlex.split(base[-1]) == ["--lateral-resolution", "0.8"]
+    assert shlex.split(treat[treat.index("--sumo-args") + 1])[-2:] == ["--lateral-resolution", "0.8"]
