@@ -954,7 +954,7 @@ def yield_setup(links: list[tuple[Any, ...]], via: str = "in_0_to", waiting: tup
     tracks = SimpleNamespace(lanes=SimpleNamespace(name=lambda k: via), lights=SimpleNamespace(name=lambda k: f"tl{k}"))
     # No link state known (""): the decision rests on SUMO's getNextLinks; no zipper.
     network = SimpleNamespace(internal_vias={":j_w"}, waiting_point_after=lambda v: waiting,
-                              is_zipper=lambda v: False, link_state=lambda v: "", lanes_after=lambda v: [], internal_foes=lambda v: [])
+                              is_zipper=lambda v: False, link_state=lambda v: "", lanes_after=lambda v: [], lanes_next=lambda lane: (), internal_foes=lambda v: [])
     j = Junctions(conn, network, tracks, fleet, 4.0)  # type: ignore[arg-type]
 
     def busy(vid: str, lane: str, horizon_s: float = jn.INTERNAL_YIELD_S, gap: float | None = None) -> bool:
@@ -1057,7 +1057,7 @@ def keep_clear_setup(out_len: float = 50.0, keep_clear: bool = True, roundabout:
     conn.vehicle.add("me", speed=6.0, pos=80.0, lane="in_0")
     conn.lanes = {"in_0": ["me"], ":j_0_0": [], "out_0": []}
     after = {":j_0_0": [(":j_0_0", 10.0), ("out_0", out_len)]}
-    network = SimpleNamespace(lanes_after=lambda v: after.get(v, []), keeps_clear=lambda v: keep_clear,
+    network = SimpleNamespace(lanes_after=lambda v: after.get(v, []), lanes_next=lambda lane: (), keeps_clear=lambda v: keep_clear,
                               in_roundabout=lambda edge: edge in roundabout)
     return conn, Junctions(conn, network, None, None, 4.0)  # type: ignore[arg-type]
 
@@ -1658,7 +1658,7 @@ def test_a_leader_on_the_tracks_way_is_taken_when_sumo_has_the_vehicle_beside_it
     conn.get_lane_id = lambda vid: v.cars[vid]["lane"]  # type: ignore[attr-defined]
     conn.get_lane_pos = lambda vid: v.cars[vid]["pos"]  # type: ignore[attr-defined]
     after = {":j_0_1": [(":j_0_1", 20.0), ("out_1", 100.0)]}
-    j = Junctions(conn, SimpleNamespace(lanes_after=lambda via: after.get(via, [])), None, None, 4.0)  # type: ignore[arg-type]
+    j = Junctions(conn, SimpleNamespace(lanes_after=lambda via: after.get(via, []), lanes_next=lambda lane: ()), None, None, 4.0)  # type: ignore[arg-type]
     track = ["in_1", ":j_0_1", "out_1"]
     far = ("elsewhere", 25.9)
     assert j.leader_on_track("me", track, far) == ("ahead", pytest.approx(11.0))
@@ -1688,7 +1688,7 @@ def test_beside_its_tracks_lane_the_vehicle_is_measured_where_blendtrack_put_it(
     front = {"lane": 1, "pos": 9.5}
     fleet = SimpleNamespace(front_lane_position=lambda slot: (front["lane"], front["pos"]))
     tracks = SimpleNamespace(lanes=SimpleNamespace(names=["in_1", ":j_0_1", "out_1"]))
-    j = Junctions(conn, SimpleNamespace(lanes_after=lambda via: after.get(via, [])), tracks, fleet, 4.0,  # type: ignore[arg-type]
+    j = Junctions(conn, SimpleNamespace(lanes_after=lambda via: after.get(via, []), lanes_next=lambda lane: ()), tracks, fleet, 4.0,  # type: ignore[arg-type]
                   controlled={"me": SimpleNamespace(slot=0)})
     track = ["in_1", ":j_0_1", "out_1"]
     assert j.leader_beyond("me", track) == ("ahead", pytest.approx(9.5))
@@ -1701,7 +1701,7 @@ def _fanout_junctions(conn: FakeConn) -> Junctions:
     """Lane "in_1" (20 m) fans out over ":j_0_1" (10 m, into "out_1") and
     ":j_0_2" (10 m, into "out_2")."""
     after = {":j_0_1": [(":j_0_1", 10.0), ("out_1", 100.0)], ":j_0_2": [(":j_0_2", 10.0), ("out_2", 100.0)]}
-    net = SimpleNamespace(fanouts=lambda: {"in_1": ((":j_0_1", ":j_0_2"), 20.0)}, lanes_after=lambda via: after.get(via, []),
+    net = SimpleNamespace(fanouts=lambda: {"in_1": ((":j_0_1", ":j_0_2"), 20.0)}, lanes_after=lambda via: after.get(via, []), lanes_next=lambda lane: (),
                           from_lane=lambda via: "in_1", junction_lanes=lambda via: (np.zeros((0, 2)), ()))
     return Junctions(conn, net, None, None, 4.0)  # type: ignore[arg-type]
 
@@ -1752,7 +1752,7 @@ def _merge_junctions(conn: FakeConn, controlled: Any = None) -> Junctions:
              ":s_1_0": [(":s_1_0", 7.0), ("maj2", 50.0)]}
     ways = {"out": [((":m_0_0", 6.0),), ((":m_1_0", 8.0),)], "maj2": [((":s_0_0", 5.0),), ((":s_1_0", 7.0),)]}
     lengths = {"maj": 50.0, "min": 40.0, "short": 0.2}
-    net = SimpleNamespace(lanes_after=lambda via: after.get(via, []), ways_into=lambda lane: ways.get(lane, []),
+    net = SimpleNamespace(lanes_after=lambda via: after.get(via, []), lanes_next=lambda lane: (), ways_into=lambda lane: ways.get(lane, []),
                           lane_length=lengths.__getitem__, lanes_into_merges=lambda: frozenset({"maj", "min", "short"}))
     return Junctions(conn, net, None, None, 4.0, controlled={} if controlled is None else controlled)  # type: ignore[arg-type]
 
@@ -1844,6 +1844,7 @@ def test_the_leader_a_merging_vehicle_displaces_stays_a_soft_obstacle() -> None:
         network=SimpleNamespace(fanouts=dict),
         junctions=_merge_junctions(conn),
         sumo_leaders=SimpleNamespace(correct=lambda leaders: leaders),
+        sublane=SimpleNamespace(active=False),
         lanes=SimpleNamespace(add_merge_leads=handed.append),
     )
     # "stand" 27 m ahead: nearer than the foe's 28 m, it stays the leader.
@@ -2197,7 +2198,7 @@ def test_a_sumo_driver_waiting_for_the_controlled_vehicle_s_way_at_an_internal_s
     prohibitors = {":w_1_0": [(":w_0_0", "maj", 50.0, "", -1)]}
 
     def junctions(yields: bool, controlled: Any = None) -> Junctions:
-        net = SimpleNamespace(lanes_after=lambda via: after.get(via, []), ways_into=lambda lane: ways.get(lane, []),
+        net = SimpleNamespace(lanes_after=lambda via: after.get(via, []), lanes_next=lambda lane: (), ways_into=lambda lane: ways.get(lane, []),
                               lane_length=lambda lane: 50.0, lanes_into_merges=lambda: frozenset({"maj"}),
                               prohibitors=lambda via: prohibitors.get(via, []) if yields else [])
         return Junctions(conn, net, None, None, 4.0, controlled={} if controlled is None else controlled)  # type: ignore[arg-type]
@@ -2238,7 +2239,7 @@ def test_before_a_fanout_a_body_standing_across_the_way_on_the_branch_beside_is_
     net = SimpleNamespace(
         from_lane=lambda via: "in_0" if via.startswith(":f_0_") else None,
         fanouts=lambda: {"in_0": ((":f_0_0", ":f_0_1"), 100.0)},
-        lanes_after=lambda via: after.get(via, []),
+        lanes_after=lambda via: after.get(via, []), lanes_next=lambda lane: (),
         junction_lanes=lambda via: (np.array([[0.0, 0.0], [10.0, 0.0]]), (":f_0_1",)),
         junction_exits=lambda via: ("out_1",),
     )
