@@ -447,15 +447,17 @@ class Junctions:
         ``getLeader`` gives it; ``dist``: from ``vid``'s front to the start
         of the first lane."""
         veh = self.conn.sumo.vehicle
+
+        def back(other: str) -> float:
+            return float(veh.getLanePosition(other)) - float(veh.getLength(other))
+
         for k, (nxt, length) in enumerate(way):
             # SUMO lists a lane's vehicles back to front.
             on = [x for x in self.conn.vehicles_on(nxt) if x != vid]
             if k == 0 and on_first is not None:
                 on = on_first(on)
             if on:
-                other = on[0]
-                back = float(veh.getLanePosition(other)) - float(veh.getLength(other))
-                return other, dist + back - float(veh.getMinGap(vid))
+                return on[0], dist + back(on[0]) - float(veh.getMinGap(vid))
             dist += length
         if not way:
             return None
@@ -472,9 +474,9 @@ class Junctions:
             on = [x for x in self.conn.vehicles_on(nxt) if x != vid]
             if not on:
                 continue
-            back = float(veh.getLanePosition(on[0])) - float(veh.getLength(on[0]))
-            if back < 0.0 and (best is None or dist + back < best[1]):
-                best = (on[0], dist + back)
+            hang = back(on[0])
+            if hang < 0.0 and (best is None or dist + hang < best[1]):
+                best = (on[0], dist + hang)
         return None if best is None else (best[0], best[1] - float(veh.getMinGap(vid)))
 
     def leader_at_fanout(self, vid: str, lane: str, track_lanes: list[str], lead: Any) -> Any:

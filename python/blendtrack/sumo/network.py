@@ -455,11 +455,7 @@ class Network:
         it has none); () for a lane the network does not have."""
         hit = self._next.get(lane)
         if hit is None:
-            try:
-                out = self.net().getLane(lane).getOutgoing()
-            except (KeyError, ValueError):
-                out = []
-            hit = self._next[lane] = tuple(dict.fromkeys(c.getViaLaneID() or c.getToLane().getID() for c in out))
+            hit = self._next[lane] = tuple(dict.fromkeys(c.getViaLaneID() or c.getToLane().getID() for c in self._outgoing(lane)))
         return hit
 
     def through_length(self, lane: str, to: str) -> float | None:
@@ -468,17 +464,17 @@ class Network:
         None when ``lane`` has no connection to ``to``."""
         key = (lane, to)
         if key not in self._through:
-            found = None
-            try:
-                out = self.net().getLane(lane).getOutgoing()
-            except (KeyError, ValueError):
-                out = []
-            for c in out:
-                if c.getToLane().getID() == to:
-                    found = sum(float(part.getLength()) for part in _via_chain(self.net(), c))
-                    break
-            self._through[key] = found
+            self._through[key] = next(
+                (sum(float(part.getLength()) for part in _via_chain(self.net(), c))
+                 for c in self._outgoing(lane) if c.getToLane().getID() == to), None)
         return self._through[key]
+
+    def _outgoing(self, lane: str) -> list[Any]:
+        """sumolib's connections out of ``lane`` ([] for a lane the network does not have)."""
+        try:
+            return list(self.net().getLane(lane).getOutgoing())
+        except (KeyError, ValueError):
+            return []
 
     def keeps_clear(self, via: str) -> bool:
         """Must the junction be kept clear on the way of ``via`` (the
